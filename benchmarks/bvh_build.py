@@ -1,0 +1,103 @@
+"""Benchmark of volcl.bvh.build_bvh on seeded triangle soups of several sizes.
+
+Each soup is a tessellated bumpy sphere (about 70 % of the triangles, with sliver triangles at the
+poles) plus small random triangles scattered in a shell around it. Prints machine info, then one
+table row per size: build time (best of --repeat runs), SAH cost, node count, node memory per
+triangle, maximum depth and average leaf size.
+
+    python benchmarks/bvh_build.py [--sizes 100000 1000000] [--repeat 3] [--max-leaf 4] [--bins 16]
+"""
+import argparse
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from volcl.bvh import build_bvh, node_depths, sah_cost  # noqa: E402
+
+
+def cpu_model():
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+def bumpy_sphere(rng, n_tris):
+    """Latitude-longitude sphere with a smooth radial bump pattern and a little noise."""
+    rows = max(2, int(np.sqrt(n_tris / 4)))
+    cols = max(3, n_tris // (2 * rows))
+    theta = np.linspace(0.0, np.pi, rows + 1)
+    phi = np.linspace(0.0, 2.0 * np.pi, cols + 1)
+    t, p = np.meshgrid(theta, phi, indexing="ij")
+    r = 1.0 + 0.05 * np.sin(7 * t) * np.cos(5 * p) + 0.002 * rng.standard_normal(t.shape)
+    verts = np.stack([r * np.sin(t) * np.cos(p), r * np.sin(t) * np.sin(p), r * np.cos(t)], -1)
+    a, b, c, d = verts[:-1, :-1], verts[:-1, 1:], verts[1:, :-1], verts[1:, 1:]
+    return np.concatenate([np.stack([a, b, d], -2), np.stack([a, d, c], -2)]).reshape(-1, 3, 3)
+
+
+def scattered(rng, n_tris):
+    """Small random triangles in a shell of radius 1.2 to 3 around the sphere."""
+    direction = rng.standard_normal((n_tris, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    centre = direction * rng.uniform(1.2, 3.0, (n_tris, 1))
+    return centre[:, None, :] + 0.01 * rng.standard_normal((n_tris, 3, 3))
+
+
+def triangle_soup(n, seed=0):
+    rng = np.random.default_rng(seed)
+    sphere = bumpy_sphere(rng, int(0.7 * n))[:n]
+    tris = np.concatenate([sphere, scattered(rng, n - len(sphere))])
+    return tris[rng.permutation(n)]  # input order carries no spatial coherence
+
+
+def measure(n, repeat, max_leaf, bins):
+    tris = triangle_soup(n)
+    lo, hi = tris.min(axis=1), tris.max(axis=1)
+    best = np.inf
+    for _ in range(repeat):
+        start = time.perf_counter()
+        nodes, order = build_bvh(lo, hi, max_leaf=max_leaf, bins=bins)
+        best = min(best, time.perf_counter() - start)
+    leaves = nodes["count"] > 0
+    return {
+        "triangles": n,
+        "build s": best,
+        "SAH cost": sah_cost(nodes),
+        "nodes": len(nodes),
+        "B/tri": nodes.nbytes / n,
+        "max depth": int(node_depths(nodes).max()),
+        "avg leaf": n / np.count_nonzero(leaves),
+    }
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[100_000, 1_000_000])
+    parser.add_argument("--repeat", type=int, default=3, help="runs per size; the best is kept")
+    parser.add_argument("--max-leaf", type=int, default=4)
+    parser.add_argument("--bins", type=int, default=16)
+    args = parser.parse_args()
+
+    print(f"cpu: {cpu_model()}, {os.cpu_count()} logical cores")
+    print(f"python {platform.python_version()}, numpy {np.__version__}, "
+          f"max_leaf {args.max_leaf}, bins {args.bins}, best of {args.repeat}")
+    header = f"{'triangles':>10} {'build s':>8} {'SAH cost':>9} {'nodes':>9} {'B/tri':>6} " \
+             f"{'max depth':>9} {'avg leaf':>8}"
+    print(header)
+    print("-" * len(header))
+    for n in args.sizes:
+        r = measure(n, args.repeat, args.max_leaf, args.bins)
+        print(f"{r['triangles']:>10} {r['build s']:>8.3f} {r['SAH cost']:>9.2f} {r['nodes']:>9} "
+              f"{r['B/tri']:>6.1f} {r['max depth']:>9} {r['avg leaf']:>8.2f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,60 @@
+/* Constants and small vector helpers used by every other kernel file. */
+#ifndef VOLCL_COMMON_H
+#define VOLCL_COMMON_H
+
+#define VOLCL_PI 3.14159265358979323846f
+#define VOLCL_INV_PI 0.31830988618379067154f
+#define VOLCL_INV_4PI 0.07957747154594766788f
+#define VOLCL_INF INFINITY
+
+/* Every VOLCL_HAS_* flag must come from the host as 0 or 1; a missing one is a build error, never a
+ * silent default. */
+#if !defined(VOLCL_HAS_SPHERES) || !defined(VOLCL_HAS_SHADING_NORMALS) || !defined(VOLCL_HAS_DIFFUSE) \
+    || !defined(VOLCL_HAS_DIELECTRIC) || !defined(VOLCL_HAS_CONDUCTOR) || !defined(VOLCL_HAS_NULL_BSDF) \
+    || !defined(VOLCL_HAS_AREA_LIGHTS) || !defined(VOLCL_HAS_POINT_LIGHTS) \
+    || !defined(VOLCL_HAS_DIRECTIONAL_LIGHTS) || !defined(VOLCL_HAS_ENV_LIGHTS) || !defined(VOLCL_HAS_MEDIA) \
+    || !defined(VOLCL_HAS_MEDIUM_BOUNDARIES) || !defined(VOLCL_HAS_CHROMATIC_MEDIA) || !defined(VOLCL_HAS_HG) \
+    || !defined(VOLCL_HAS_EMISSIVE_MEDIA)
+#error "volcl: every VOLCL_HAS_* feature flag must be defined to 0 or 1 by the host"
+#endif
+
+inline float3 vload_f3(const __global float *p) { return (float3)(p[0], p[1], p[2]); }
+
+inline float max_component(float3 v) { return fmax(v.x, fmax(v.y, v.z)); }
+inline float mean_component(float3 v) { return (v.x + v.y + v.z) * (1.0f / 3.0f); }
+inline float luminance(float3 v) { return 0.212671f * v.x + 0.715160f * v.y + 0.072169f * v.z; }
+
+/* Orthonormal basis around a unit normal (Duff et al. 2017), free of the singularity of the
+ * cross-product-with-an-axis construction. */
+inline void make_frame(float3 n, float3 *s, float3 *t) {
+    float sign = copysign(1.0f, n.z);
+    float a = -1.0f / (sign + n.z);
+    float b = n.x * n.y * a;
+    *s = (float3)(1.0f + sign * n.x * n.x * a, sign * b, -sign * n.x);
+    *t = (float3)(b, sign + n.y * n.y * a, -n.y);
+}
+
+inline float3 frame_to_world(float3 v, float3 s, float3 t, float3 n) { return v.x * s + v.y * t + v.z * n; }
+
+inline float3 frame_to_local(float3 v, float3 s, float3 t, float3 n) {
+    return (float3)(dot(v, s), dot(v, t), dot(v, n));
+}
+
+inline float power_heuristic(float pdf_a, float pdf_b) {
+    float a = pdf_a * pdf_a, b = pdf_b * pdf_b;
+    /* both pdfs can be huge (near-delta lobes); a/(a+b) on squares overflows to inf/inf */
+    if (isinf(a)) return isinf(b) ? 0.5f : 1.0f;
+    return a + b > 0.0f ? a / (a + b) : 0.0f;
+}
+
+/* Ray origin offset off a surface, along the geometric normal towards the side `d` leaves on.
+ * The offset scales with the magnitude of the position because float32 spacing does (Mitsuba's
+ * approach); a fixed epsilon either self-intersects far from the origin or leaks through thin walls
+ * near it. Used for every ray that leaves a surface: continuation rays and shadow rays alike. */
+inline float3 offset_origin(float3 p, float3 ng, float3 d) {
+    float mag = fmax(fmax(fabs(p.x), fabs(p.y)), fmax(fabs(p.z), 1.0f));
+    float eps = mag * 1e-5f;
+    return p + (dot(d, ng) >= 0.0f ? eps : -eps) * ng;
+}
+
+#endif

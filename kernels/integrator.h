@@ -1,0 +1,213 @@
+/* The volumetric path tracer: unidirectional paths with surface and medium vertices, next-event
+ * estimation combined with BSDF / phase sampling by multiple importance sampling (power heuristic),
+ * and Russian roulette. Directions: `d` is the travel direction of the current ray; at a vertex wo = -d
+ * points back to the viewer and wi to the next vertex (see bsdf.h, phase.h for their conventions).
+ *
+ * Depth counts scattering vertices as in Mitsuba: max_depth = 1 shows emitters only, 2 adds direct
+ * lighting. Passing through a null boundary is not a vertex and does not count.
+ */
+#ifndef VOLCL_INTEGRATOR_H
+#define VOLCL_INTEGRATOR_H
+
+/* Hard bound on loop iterations (vertices plus boundary crossings): Russian roulette ends paths long
+ * before it (survival is capped at 0.95, so 1e-22 of paths reach 1000 vertices); it only stops
+ * pathological scenes from spinning forever. */
+#define VOLCL_MAX_STEPS 1024
+/* Boundaries a shadow ray may cross before it is declared blocked. */
+#define VOLCL_MAX_CROSSINGS 64
+
+/* Medium on the side of surface point `s` that direction `w` leaves on; media follow shapes that
+ * name one, and otherwise stay as they were (Mitsuba's rule). */
+inline int medium_after(const SceneData *sc, const SurfacePoint *s, float3 w, int current) {
+#if VOLCL_HAS_MEDIUM_BOUNDARIES
+    __global const ShapeInfo *sh = &sc->shapes[s->shape];
+    if (sh->is_transition) return dot(w, s->ng) > 0.0f ? sh->exterior : sh->interior;
+#endif
+    return current;
+}
+
+/* Fraction of light that travels from o along w for distance t_max: zero if an opaque or refracting
+ * surface is in the way, otherwise the product of the transmittances of the media crossed. */
+inline float3 shadow_transmittance(const SceneData *sc, float3 o, float3 w, float t_max, int medium) {
+#if VOLCL_HAS_MEDIA || VOLCL_HAS_NULL_BSDF
+    float3 tr = (float3)(1.0f);
+    for (int i = 0; i < VOLCL_MAX_CROSSINGS; ++i) {
+        Hit h;
+        bool hit = bvh_trace(sc, o, w, t_max, false, &h);
+        float seg = hit ? h.t : t_max;
+#if VOLCL_HAS_MEDIA
+        if (medium >= 0) tr *= medium_transmittance(&sc->media[medium], seg);
+#endif
+        if (!hit) return tr;
+        SurfacePoint s = surface_point(sc, &h, o, w);
+        if (sc->bsdfs[sc->shapes[s.shape].bsdf].type != BSDF_NULL) return (float3)(0.0f);
+        if (max_component(tr) <= 0.0f) return tr;
+        medium = medium_after(sc, &s, w, medium);
+        float3 next = offset_origin(s.p, s.ng, w);
+        /* keep the segment's far end fixed while the origin moves past the boundary */
+        if (t_max < INFINITY) t_max = fmax(t_max - dot(next - o, w), 0.0f);
+        o = next;
+    }
+    return (float3)(0.0f);
+#else
+    Hit h;
+    return bvh_trace(sc, o, w, t_max, true, &h) ? (float3)(0.0f) : (float3)(1.0f);
+#endif
+}
+
+/* Light arriving at a vertex by next-event estimation, already weighted by MIS against `scatter_pdf`.
+ * `f` is the vertex's scattering value towards ls.wi (BSDF value * cos, or phase value). */
+inline float3 nee_contribution(const SceneData *sc, const LightSample *ls, float3 f, float scatter_pdf,
+                               float3 origin, int medium) {
+    /* stop a hair before the light so the shadow ray never hits the emitter itself */
+    float t_max = ls->dist < INFINITY ? ls->dist * 0.9999f : INFINITY;
+    float3 tr = shadow_transmittance(sc, origin, ls->wi, t_max, medium);
+    if (max_component(tr) <= 0.0f) return (float3)(0.0f);
+    float w = ls->delta ? 1.0f : power_heuristic(ls->pdf, scatter_pdf);
+    return f * ls->value * tr * (w / ls->pdf);
+}
+
+inline float3 integrator_radiance(const SceneData *sc, Rng *rng, float3 o, float3 d, float t_max) {
+    __global const RenderParams *rp = sc->params;
+    float3 L = (float3)(0.0f), beta = (float3)(1.0f);
+    int depth = 0;
+    int medium = rp->camera_medium;
+    bool specular = true;       /* last vertex was delta (or the camera): emission hits get no MIS */
+    float prev_pdf = 0.0f;      /* solid-angle pdf of the direction sampled at the last vertex */
+    float3 prev_p = o;
+    float eta_scale = 1.0f;
+    bool has_lights = rp->light_count > 0;
+
+    for (int step = 0; step < VOLCL_MAX_STEPS; ++step) {
+        Hit h;
+        bool hit = bvh_trace(sc, o, d, t_max, false, &h);
+        bool medium_vertex = false;
+
+#if VOLCL_HAS_MEDIA
+        if (medium >= 0) {
+            __global const Medium *m = &sc->media[medium];
+            float u_channel = rng_next_float(rng);
+            MediumSample ms = medium_sample_distance(m, hit ? h.t : t_max, beta, u_channel, rng_next_float(rng));
+#if VOLCL_HAS_EMISSIVE_MEDIA
+            L += beta * ms.emission;
+#endif
+            beta *= ms.weight;
+            if (ms.scattered) {
+                float3 p = o + ms.t * d;
+                if (rp->max_depth >= 0 && depth + 1 >= rp->max_depth) break;
+                if (max_component(beta) <= 0.0f) break;
+                /* next-event estimation, MIS against phase sampling */
+                if (has_lights) {
+                    LightSample ls;
+                    float u_pick = rng_next_float(rng);
+                    float2 ul = rng_next_float2(rng);
+                    if (light_sample(sc, p, u_pick, ul, &ls) && max_component(ls.value) > 0.0f) {
+                        float ph = phase_eval(m, dot(d, ls.wi));
+                        L += beta * nee_contribution(sc, &ls, (float3)(ph), ph, p, medium);
+                    }
+                }
+                float3 nd;
+                prev_pdf = phase_sample(m, d, rng_next_float2(rng), &nd);
+                specular = false;
+                prev_p = p;
+                o = p;
+                d = nd;
+                t_max = INFINITY;
+                ++depth;
+                medium_vertex = true;
+            }
+        }
+#endif
+        if (!medium_vertex) {
+        if (!hit) {
+#if VOLCL_HAS_ENV_LIGHTS
+            if (rp->env_light >= 0 && !(rp->hide_emitters && depth == 0)) {
+                float w = specular ? 1.0f : power_heuristic(prev_pdf, light_env_pdf(sc));
+                L += beta * vload_f3(sc->lights[rp->env_light].value) * w;
+            }
+#endif
+            break;
+        }
+        {
+            SurfacePoint s = surface_point(sc, &h, o, d);
+            __global const ShapeInfo *shape = &sc->shapes[s.shape];
+            float3 wo_world = -d;
+#if VOLCL_HAS_AREA_LIGHTS
+            if (shape->light >= 0 && !(rp->hide_emitters && depth == 0)) {
+                float3 le = light_area_emission(&sc->lights[shape->light], s.ns, wo_world);
+                if (max_component(le) > 0.0f) {
+                    float w = specular ? 1.0f
+                                       : power_heuristic(prev_pdf, light_area_pdf(sc, shape->light, prev_p, s.p, s.ng));
+                    L += beta * le * w;
+                }
+            }
+#endif
+            __global const Bsdf *bsdf = &sc->bsdfs[shape->bsdf];
+#if VOLCL_HAS_NULL_BSDF
+            if (bsdf->type == BSDF_NULL) {
+                /* a bare boundary: the ray goes on unchanged, possibly into another medium */
+                medium = medium_after(sc, &s, d, medium);
+                float3 next = offset_origin(s.p, s.ng, d);
+                if (t_max < INFINITY) t_max = fmax(t_max - dot(next - o, d), 0.0f);
+                o = next;
+                continue;
+            }
+#endif
+            if (rp->max_depth >= 0 && depth + 1 >= rp->max_depth) break;
+
+            float3 ss, ts;
+            make_frame(s.ns, &ss, &ts);
+            float3 wo = frame_to_local(wo_world, ss, ts, s.ns);
+            bool delta = bsdf_is_delta(bsdf);
+
+            if (has_lights && !delta) {
+                LightSample ls;
+                float u_pick = rng_next_float(rng);
+                float2 ul = rng_next_float2(rng);
+                if (light_sample(sc, s.p, u_pick, ul, &ls) && max_component(ls.value) > 0.0f) {
+                    float pdf;
+                    float3 f = bsdf_eval(bsdf, wo, frame_to_local(ls.wi, ss, ts, s.ns), &pdf);
+                    if (max_component(f) > 0.0f) {
+                        L += beta * nee_contribution(sc, &ls, f, pdf, offset_origin(s.p, s.ng, ls.wi),
+                                                     medium_after(sc, &s, ls.wi, medium));
+                    }
+                }
+            } else {
+                /* keep the random-number sequence aligned whatever the vertex type */
+                rng_next_float(rng);
+                rng_next_float2(rng);
+            }
+            if (rp->specular_chains_only && !delta) break;
+
+            BsdfSample bs;
+            float u1 = rng_next_float(rng);
+            if (!bsdf_sample(bsdf, wo, u1, rng_next_float2(rng), &bs)) break;
+            float3 wi = frame_to_world(bs.wi, ss, ts, s.ns);
+            /* a shading normal can send the sampled direction below the geometric surface; the ray
+             * would then start on the wrong side, so such a path ends */
+            if (dot(wi, s.ng) * dot(bs.wi.z >= 0.0f ? s.ns : -s.ns, s.ng) < 0.0f) break;
+            beta *= bs.weight;
+            eta_scale *= bs.eta * bs.eta;
+            specular = bs.delta;
+            prev_pdf = bs.pdf;
+            prev_p = s.p;
+            medium = medium_after(sc, &s, wi, medium);
+            o = offset_origin(s.p, s.ng, wi);
+            d = wi;
+            t_max = INFINITY;
+            ++depth;
+        }
+        }
+        if (max_component(beta) <= 0.0f) break;
+        if (depth >= rp->rr_depth) {
+            /* survival follows the throughput (undoing refraction's 1/eta^2), capped so paths end even
+             * when the albedo is exactly 1 */
+            float q = fmin(max_component(beta) * eta_scale, 0.95f);
+            if (rng_next_float(rng) >= q) break;
+            beta /= q;
+        }
+    }
+    return L;
+}
+
+#endif

@@ -1,0 +1,75 @@
+/* Warps from the unit square, each paired with its pdf (Nori's habit: a routine and its density are
+ * never apart). Directions are unit vectors; pdfs are per unit solid angle unless the name says area. */
+#ifndef VOLCL_SAMPLING_H
+#define VOLCL_SAMPLING_H
+
+/* Concentric map (Shirley and Chiu): keeps strata compact, unlike the polar map. */
+inline float2 sample_concentric_disk(float2 u) {
+    float2 o = 2.0f * u - 1.0f;
+    if (o.x == 0.0f && o.y == 0.0f) return (float2)(0.0f, 0.0f);
+    float r, theta;
+    if (fabs(o.x) > fabs(o.y)) {
+        r = o.x;
+        theta = (VOLCL_PI / 4.0f) * (o.y / o.x);
+    } else {
+        r = o.y;
+        theta = (VOLCL_PI / 2.0f) - (VOLCL_PI / 4.0f) * (o.x / o.y);
+    }
+    return r * (float2)(cos(theta), sin(theta));
+}
+
+inline float3 sample_cosine_hemisphere(float2 u) {
+    float2 d = sample_concentric_disk(u);
+    float z = sqrt(fmax(0.0f, 1.0f - d.x * d.x - d.y * d.y));
+    return (float3)(d.x, d.y, z);
+}
+
+inline float sample_cosine_hemisphere_pdf(float3 v) { return v.z > 0.0f ? v.z * VOLCL_INV_PI : 0.0f; }
+
+inline float3 sample_uniform_sphere(float2 u) {
+    float z = 1.0f - 2.0f * u.x;
+    float r = sqrt(fmax(0.0f, 1.0f - z * z));
+    float phi = 2.0f * VOLCL_PI * u.y;
+    return (float3)(r * cos(phi), r * sin(phi), z);
+}
+
+inline float sample_uniform_sphere_pdf(void) { return VOLCL_INV_4PI; }
+
+/* Uniform point on a triangle as barycentrics (b1, b2); the square-root map. */
+inline float2 sample_uniform_triangle(float2 u) {
+    float su = sqrt(u.x);
+    return (float2)(1.0f - su, u.y * su);
+}
+
+/* Direction in the cone of half-angle acos(cos_max) around +z, uniform in solid angle. */
+inline float3 sample_uniform_cone(float2 u, float cos_max) {
+    float cos_t = 1.0f - u.x * (1.0f - cos_max);
+    float sin_t = sqrt(fmax(0.0f, 1.0f - cos_t * cos_t));
+    float phi = 2.0f * VOLCL_PI * u.y;
+    return (float3)(sin_t * cos(phi), sin_t * sin(phi), cos_t);
+}
+
+inline float sample_uniform_cone_pdf(float cos_max) { return 1.0f / (2.0f * VOLCL_PI * (1.0f - cos_max)); }
+
+/* Index of the first cdf entry above u*total in cdf[0..n): a binary search over an inclusive prefix
+ * sum, which the host normalizes to end at exactly 1. */
+inline int sample_discrete_cdf(const __global float *cdf, int n, float u) {
+    int lo = 0, hi = n - 1;
+    while (lo < hi) {
+        int mid = (lo + hi) >> 1;
+        if (cdf[mid] > u) hi = mid; else lo = mid + 1;
+    }
+    return lo;
+}
+
+/* Offset from a pixel centre distributed like the reconstruction filter along one axis: the host
+ * tabulates the filter's inverse CDF on `size` points spanning [-radius, radius]. Sampling the filter
+ * (instead of splatting weighted samples) converges to the same normalized filtered image. */
+inline float sample_filter_offset(const __global float *inv_cdf, int size, float u) {
+    float x = u * (float)(size - 1);
+    int i = min((int)x, size - 2);
+    float f = x - (float)i;
+    return mix(inv_cdf[i], inv_cdf[i + 1], f);
+}
+
+#endif

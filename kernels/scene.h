@@ -1,0 +1,20 @@
+/* The scene buffers as one bundle of pointers, so device functions take one argument for them. */
+#ifndef VOLCL_SCENE_H
+#define VOLCL_SCENE_H
+
+typedef struct {
+    __global const BvhNode *nodes;
+    __global const int *prim_ids;       /* >= 0: triangle index; < 0: sphere index -(id + 1) */
+    __global const Triangle *triangles;
+    __global const TriangleNormals *normals;
+    __global const Sphere *spheres;
+    __global const ShapeInfo *shapes;
+    __global const Bsdf *bsdfs;
+    __global const Light *lights;
+    __global const float *light_tri_cdf;    /* per area light: normalized prefix sums of triangle areas */
+    __global const int *light_tris;
+    __global const Medium *media;
+    __global const RenderParams *params;
+} SceneData;
+
+#endif

@@ -1,0 +1,133 @@
+/* Structs shared with the host. volcl/layout.py mirrors each one byte for byte.
+ *
+ * Rules that keep both sides in agreement: only 4-byte scalars and arrays of them (no float3, which
+ * OpenCL C aligns to 16 bytes), sizes a multiple of 16, explicit padding fields named pad*.
+ * Units: positions in scene units, radiance in W/(m^2 sr), intensity in W/sr, coefficients per unit length.
+ */
+#ifndef VOLCL_TYPES_H
+#define VOLCL_TYPES_H
+
+/* Flattened BVH node in depth-first order. Interior (count == 0): the left child is the next node and
+ * `index` is the right child. Leaf (count > 0): primitive slots [index, index + count) of prim_ids. */
+typedef struct {
+    float bmin[3];
+    int index;
+    float bmax[3];
+    int count;
+} BvhNode;
+
+/* A triangle as its three vertices: the watertight test needs the exact shared vertices (a vertex
+ * rebuilt as p0 + edge rounds differently in each triangle that shares it, and rays leak between). */
+typedef struct {
+    float p0[3];
+    int shape;
+    float p1[3];
+    int normals;    /* index into the shading-normal buffer, or -1 for a flat triangle */
+    float p2[3];
+    int pad0;
+} Triangle;
+
+/* Per-vertex shading normals of one triangle. */
+typedef struct {
+    float n0[3];
+    float n1[3];
+    float n2[3];
+    int pad0[3];
+} TriangleNormals;
+
+typedef struct {
+    float center[3];
+    float radius;
+    int shape;
+    int flip;       /* flip_normals: the outward normal points inward */
+    int pad0[2];
+} Sphere;
+
+/* A shape's surface and media: what a hit on one of its primitives means. */
+typedef struct {
+    int bsdf;
+    int light;      /* area light index, or -1 */
+    int interior;   /* medium index, or -1 for vacuum */
+    int exterior;
+    int is_transition;  /* the shape names a medium on either side: crossing it changes the medium */
+    int pad0[3];
+} ShapeInfo;
+
+#define BSDF_DIFFUSE 0
+#define BSDF_DIELECTRIC 1
+#define BSDF_CONDUCTOR 2
+#define BSDF_NULL 3
+
+typedef struct {
+    int type;
+    int twosided;
+    float eta;              /* dielectric: int_ior / ext_ior */
+    int conductor_mirror;   /* conductor without eta/k: reflect everything, times `color` */
+    float color[3];         /* diffuse reflectance or specular reflectance */
+    float pad0;
+    float cond_eta[3];
+    float pad1;
+    float cond_k[3];
+    float pad2;
+} Bsdf;
+
+#define LIGHT_AREA 0
+#define LIGHT_POINT 1
+#define LIGHT_DIRECTIONAL 2
+#define LIGHT_CONSTANT 3
+
+typedef struct {
+    int type;
+    int tri_start;  /* area light on a mesh: its triangles are light_tris[tri_start, tri_start + tri_count) */
+    int tri_count;
+    int sphere;     /* area light on an analytic sphere: its index, else -1 */
+    float value[3]; /* radiance (area, constant), intensity (point) or irradiance (directional) */
+    float area;     /* total emitting area (area lights) */
+    float position[3];  /* point light position */
+    float pad0;
+    float direction[3]; /* directional light: the direction light travels */
+    float pad1;
+} Light;
+
+#define MEDIUM_HOMOGENEOUS 0
+
+#define PHASE_ISOTROPIC 0
+#define PHASE_HG 1
+
+typedef struct {
+    int type;
+    int phase;
+    float g;
+    int pad0;
+    float sigma_t[3];   /* extinction, scale already applied */
+    float pad1;
+    float albedo[3];
+    float pad2;
+    float emission[3];  /* sigma_a * radiance: emitted radiance per unit length */
+    float pad3;
+} Medium;
+
+/* Everything a sample pass needs besides the scene buffers. */
+typedef struct {
+    float cam_to_world[12]; /* row-major 3x4: rotation/scale columns then translation */
+    float tan_half[2];      /* tangent of half the field of view along x and y */
+    float near_clip;
+    float far_clip;
+    int width;
+    int height;
+    int max_depth;          /* Mitsuba's meaning: 1 emitters only, 2 direct lighting, < 0 unlimited */
+    int rr_depth;
+    int hide_emitters;
+    int specular_chains_only;
+    int camera_medium;      /* -1: vacuum */
+    int light_count;
+    int env_light;          /* index of the constant light, or -1 */
+    int filter_size;        /* entries of the filter's inverse-CDF table */
+    float filter_radius;    /* pixels */
+    uint seed;
+    float scene_radius;     /* bounding sphere, for directional lights */
+    float scene_center[3];
+    int pad0[4];
+} RenderParams;
+
+#endif

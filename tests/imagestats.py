@@ -1,0 +1,49 @@
+"""Statistical checks of rendered images: z-tests whose tolerance comes from the render's own
+per-pixel variance estimate, Sidak-corrected for the number of comparisons made."""
+import numpy as np
+from scipy.stats import norm
+
+# One family-wise significance for the whole suite's image tests; each check corrects for the
+# number of comparisons it makes itself.
+ALPHA = 1e-3
+
+
+def z_limit(comparisons: int, alpha: float = ALPHA) -> float:
+    """Two-sided |z| bound keeping the chance of any false failure among `comparisons` at alpha."""
+    per = 1 - (1 - alpha) ** (1 / max(comparisons, 1))
+    return float(norm.isf(per / 2))
+
+
+def assert_mean_matches(result, expected, blocks: int = 4, mask=None, what="image"):
+    """The render's mean equals `expected` (scalar, rgb or per-pixel (h, w, 3) array) within its
+    standard error: over the whole image per channel, and over blocks x blocks regions."""
+    img = result.image.astype(np.float64)
+    var = result.variance.astype(np.float64)
+    exp = np.broadcast_to(np.asarray(expected, np.float64), img.shape)
+    m = np.ones(img.shape[:2], bool) if mask is None else mask
+    h, w = img.shape[:2]
+    regions = [(slice(None), slice(None))]
+    if blocks > 1:
+        ys = np.linspace(0, h, blocks + 1).astype(int)
+        xs = np.linspace(0, w, blocks + 1).astype(int)
+        regions += [(slice(ys[i], ys[i + 1]), slice(xs[j], xs[j + 1])) for i in range(blocks) for j in range(blocks)]
+    limit = z_limit(3 * len(regions))
+    failures = []
+    for k, (sy, sx) in enumerate(regions):
+        sel = m[sy, sx]
+        n = sel.sum()
+        if n == 0:
+            continue
+        diff = (img[sy, sx][sel] - exp[sy, sx][sel]).sum(0) / n
+        se = np.sqrt(var[sy, sx][sel].sum(0)) / n
+        for c in range(3):
+            if se[c] == 0:
+                ok = abs(diff[c]) <= 1e-5 * max(1.0, abs(exp[sy, sx][sel][:, c]).mean())
+                z = 0.0 if ok else np.inf
+            else:
+                z = diff[c] / se[c]
+            if not abs(z) < limit:
+                failures.append(f"region {k} channel {c}: mean {img[sy, sx][sel][:, c].mean():.6g} expected "
+                                f"{exp[sy, sx][sel][:, c].mean():.6g} (z = {z:.2f}, limit {limit:.2f})")
+    assert not failures, f"{what}: " + "; ".join(failures[:6])
+    assert result.invalid == 0, f"{what}: {result.invalid} invalid samples"

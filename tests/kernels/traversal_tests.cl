@@ -1,0 +1,26 @@
+/* Test-only kernel: closest-hit and any-hit BVH queries for host-supplied rays. */
+#include "types.h"
+#include "common.h"
+#include "rng.h"
+#include "sampling.h"
+#include "scene.h"
+#include "bvh.h"
+
+__kernel void trace_rays(__global const BvhNode *nodes, __global const int *prim_ids,
+                         __global const Triangle *triangles, __global const Sphere *spheres,
+                         __global const float *origins, __global const float *dirs,
+                         __global float *t_out, __global int *prim_out, __global int *occluded_out) {
+    int i = get_global_id(0);
+    SceneData sc;
+    sc.nodes = nodes;
+    sc.prim_ids = prim_ids;
+    sc.triangles = triangles;
+    sc.spheres = spheres;
+    float3 o = vload3(i, origins), d = vload3(i, dirs);
+    Hit h;
+    bool hit = bvh_trace(&sc, o, d, INFINITY, false, &h);
+    t_out[i] = hit ? h.t : INFINITY;
+    prim_out[i] = hit ? h.prim : 0x7fffffff;
+    Hit h2;
+    occluded_out[i] = bvh_trace(&sc, o, d, INFINITY, true, &h2) ? 1 : 0;
+}

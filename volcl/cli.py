@@ -1,0 +1,226 @@
+"""The `volcl` command: render scenes, list devices, describe a scene, run Nori t-test files."""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+from . import __version__
+from .errors import VolclError
+
+
+def _defines(items):
+    out = {}
+    for item in items or []:
+        if "=" not in item:
+            raise VolclError(f"-D {item!r}: expected name=value")
+        k, v = item.split("=", 1)
+        out[k.strip()] = v
+    return out
+
+
+def _load(path, args):
+    from .scene import load
+    from .scene.model import Scene
+    scene = load(path, _defines(args.define))
+    if not isinstance(scene, Scene):
+        raise VolclError(f"{path} is a Nori test file, not a scene; run it with `volcl test {path}`")
+    if args.width:
+        scene.camera.width = args.width
+    if args.height:
+        scene.camera.height = args.height
+    for w in scene.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    return scene
+
+
+def _features(args):
+    if not getattr(args, "features", None):
+        return None
+    from .features import parse_override
+    try:
+        return parse_override(args.features)
+    except ValueError as exc:
+        raise VolclError(f"--features: {exc}") from None
+
+
+def _progress_bar(total, desc, quiet):
+    from tqdm import tqdm
+    return tqdm(total=total, desc=desc, unit="spp", disable=quiet, leave=False, file=sys.stderr)
+
+
+def _render_one(path, out, args, device):
+    from .image import write_image
+    from .render import Renderer
+    scene = _load(path, args)
+    spp = args.spp or scene.spp
+    renderer = Renderer(scene, device=device, features=_features(args), seed=args.seed)
+    if args.verbose:
+        print(f"{path}: {renderer.packed.triangle_count} triangles, {renderer.packed.sphere_count} spheres, "
+              f"BVH {renderer.packed.bvh_seconds:.2f} s, kernel build {renderer.build_seconds:.2f} s",
+              file=sys.stderr)
+    with _progress_bar(spp, Path(path).name, args.quiet) as bar:
+        result = renderer.render(spp, progress=bar.update)
+    meta = {"scene": str(Path(path).resolve()), "spp": result.spp, "seed": renderer.seed,
+            "device": result.device, "features": result.stats["features"],
+            "render_seconds": round(result.seconds, 3), "version": __version__,
+            "invalid_samples": result.invalid}
+    layers = {"variance": result.variance} if Path(out).suffix.lower() == ".exr" else None
+    write_image(out, result.image, meta, layers)
+    print(f"{out}: {result.spp} spp in {result.seconds:.2f} s, {result.samples_per_second / 1e6:.2f} M samples/s, "
+          f"invalid samples {result.invalid}, device {result.device}, features {result.stats['features']}")
+    return result
+
+
+def cmd_render(args):
+    from . import device as devmod
+    scenes = args.scenes
+    if args.output and len(scenes) > 1:
+        raise VolclError("-o names one output file; with several scenes, outputs are named after the scenes")
+    device = devmod.choose(args.device)
+    failures = []
+    for path in scenes:
+        out = args.output or str(Path(Path(path).name).with_suffix(".exr"))
+        try:
+            _render_one(path, out, args, device)
+        except VolclError as exc:
+            if len(scenes) == 1:
+                raise
+            print(f"error: {exc}", file=sys.stderr)
+            failures.append((path, str(exc)))
+    if len(scenes) > 1:
+        print(f"\n{len(scenes) - len(failures)} of {len(scenes)} scenes rendered")
+        for path, why in failures:
+            print(f"  FAILED {path}: {why}")
+    return 1 if failures else 0
+
+
+def cmd_devices(args):
+    from .device import kernels_build, list_devices
+    devs = list_devices()
+    if not devs:
+        from .device import INSTALL_HINT
+        print(f"no OpenCL platform found; {INSTALL_HINT}")
+        return 1
+    print(f"{'index':6} {'type':5} {'units':>5} {'memory':>9}  {'OpenCL C':12} {'kernels':8} name (vendor, platform)")
+    for d in devs:
+        dev = d.device
+        ok, why = kernels_build(d)
+        mem = f"{dev.global_mem_size / 2**30:.1f} GiB"
+        status = "build" if ok else "FAIL"
+        print(f"{d.key:6} {d.kind:5} {dev.max_compute_units:5} {mem:>9}  {dev.opencl_c_version.replace('OpenCL C ', ''):12} "
+              f"{status:8} {d.name} ({dev.vendor.strip()}, {d.platform_name})" + ("" if ok else f": {why}"))
+    return 0
+
+
+def cmd_info(args):
+    from .features import FLAGS, describe, detect
+    from .pack import pack
+    scene = _load(args.scene, args)
+    feats = _features(args) or detect(scene)
+    packed = pack(scene, feats)
+    cam = scene.camera
+    print(f"scene      {args.scene} ({scene.dialect} dialect)")
+    print(f"camera     {cam.width}x{cam.height}, fov {cam.fov:g} ({cam.fov_axis}), filter {cam.rfilter.kind}")
+    print(f"integrator {scene.integrator.kind}, max_depth {scene.integrator.max_depth}, spp {scene.spp}")
+    print(f"shapes     {len(scene.shapes)} ({packed.triangle_count} triangles, {packed.sphere_count} spheres)")
+    print(f"emitters   {sum(s.emitter_radiance is not None for s in scene.shapes)} area, "
+          + ", ".join(e.kind for e in scene.emitters))
+    print(f"media      {len(scene.media)}")
+    print(f"features   {describe(feats)}")
+    print("flags      " + " ".join(f"VOLCL_HAS_{n}={int(feats[n])}" for n in FLAGS))
+    if not args.no_build:
+        from . import device as devmod
+        from .device import cl
+        from .program import build_program, build_seconds
+        dev = devmod.choose(args.device)
+        ctx = cl.Context([dev.device])
+        t0 = time.perf_counter()
+        build_program(ctx, feats)
+        print(f"build      {time.perf_counter() - t0:.2f} s on {dev.key} {dev.name}")
+    return 0
+
+
+def cmd_test(args):
+    """Nori's t-test files: each scene's mean radiance against its reference value."""
+    from . import device as devmod
+    from .render import Renderer
+    from .scene import load
+    from .scene.model import TTest
+    test = load(args.file, _defines(args.define))
+    if not isinstance(test, TTest):
+        raise VolclError(f"{args.file}: not a <test type=\"ttest\"> file")
+    device = devmod.choose(args.device)
+    n = len(test.scenes)
+    alpha = 1 - (1 - test.significance) ** (1 / n)     # Sidak: the whole file at the stated level
+    failed = 0
+    for i, (scene, ref) in enumerate(zip(test.scenes, test.references)):
+        result = Renderer(scene, device=device, seed=args.seed).render(args.spp)
+        mean = float(result.image.mean())
+        npix = result.image.shape[0] * result.image.shape[1]
+        se = math.sqrt(float(result.variance.mean()) / npix)
+        z = (mean - ref) / se if se > 0 else (0.0 if mean == ref else math.inf)
+        p = math.erfc(abs(z) / math.sqrt(2))
+        ok = p > alpha and result.invalid == 0
+        failed += not ok
+        print(f"test {i + 1}/{n} ({scene.integrator.kind}): mean {mean:.5f} reference {ref:g} "
+              f"std.err {se:.5f} p={p:.3g} alpha={alpha:.3g} {'passed' if ok else 'FAILED'}")
+    print(f"{n - failed} passed, {failed} failed")
+    return 1 if failed else 0
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(prog="volcl", description="volcl: a volumetric path tracer on OpenCL")
+    p.add_argument("--version", action="version", version=f"volcl {__version__}")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    def scene_opts(sp):
+        sp.add_argument("-D", "--define", action="append", metavar="NAME=VALUE",
+                        help="override a scene <default> parameter")
+        sp.add_argument("--width", type=int)
+        sp.add_argument("--height", type=int)
+        sp.add_argument("--device", help="device index P:D, name substring, 'cpu' or 'gpu' (default: $VOLCL_DEVICE)")
+        sp.add_argument("--features", help="'all': compile every feature instead of only the scene's")
+        sp.add_argument("-v", "--verbose", action="store_true")
+
+    r = sub.add_parser("render", help="render one or more scenes")
+    r.add_argument("scenes", nargs="+", metavar="SCENE")
+    r.add_argument("-o", "--output", help="output file; .exr (linear float) or .png (sRGB)")
+    r.add_argument("--spp", type=int, help="samples per pixel (default: the scene's sampler)")
+    r.add_argument("--seed", type=int)
+    r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    scene_opts(r)
+    r.set_defaults(func=cmd_render)
+
+    d = sub.add_parser("devices", help="list OpenCL devices and whether volcl's kernels build on them")
+    d.set_defaults(func=cmd_devices)
+
+    i = sub.add_parser("info", help="what a scene contains and which kernel features it compiles")
+    i.add_argument("scene")
+    i.add_argument("--no-build", action="store_true")
+    scene_opts(i)
+    i.set_defaults(func=cmd_info)
+
+    t = sub.add_parser("test", help="run a Nori <test type=\"ttest\"> file")
+    t.add_argument("file")
+    t.add_argument("--spp", type=int, default=65536, help="samples per pixel per scene (default 65536)")
+    t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--device")
+    t.add_argument("-D", "--define", action="append", metavar="NAME=VALUE")
+    t.set_defaults(func=cmd_test)
+
+    args = p.parse_args(argv)
+    try:
+        return args.func(args)
+    except VolclError as exc:
+        print(f"volcl: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("volcl: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

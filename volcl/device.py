@@ -1,0 +1,121 @@
+"""OpenCL devices: listing them, proving volcl's kernels build on them, and choosing one.
+
+A device is chosen by proving that a kernel builds on it, never by its name: some drivers list a
+device whose compiler then fails every build.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from .errors import VolclError
+
+INSTALL_HINT = ("install an OpenCL driver, e.g. on Debian: apt-get install pocl-opencl-icd "
+                "(and binutils, which PoCL needs to link kernels)")
+
+
+def _prepare_environment():
+    """PoCL caches compiled kernels and fails without a writable cache directory."""
+    if "POCL_CACHE_DIR" not in os.environ:
+        base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
+        cache = base / "volcl" / "pocl"
+        try:
+            cache.mkdir(parents=True, exist_ok=True)
+        except OSError:
+            import tempfile
+            cache = Path(tempfile.gettempdir()) / f"volcl-pocl-{os.getuid()}"
+            cache.mkdir(parents=True, exist_ok=True)
+        os.environ["POCL_CACHE_DIR"] = str(cache)
+
+
+_prepare_environment()
+import pyopencl as cl  # noqa: E402  (needs the environment above)
+
+
+@dataclass
+class DeviceInfo:
+    platform_index: int
+    device_index: int
+    device: object
+    platform_name: str
+
+    @property
+    def key(self) -> str:
+        return f"{self.platform_index}:{self.device_index}"
+
+    @property
+    def name(self) -> str:
+        return self.device.name.strip()
+
+    @property
+    def kind(self) -> str:
+        t = self.device.type
+        if t & cl.device_type.GPU:
+            return "gpu"
+        if t & cl.device_type.CPU:
+            return "cpu"
+        return "accelerator" if t & cl.device_type.ACCELERATOR else "other"
+
+
+def list_devices() -> list[DeviceInfo]:
+    try:
+        platforms = cl.get_platforms()
+    except cl.Error:
+        return []
+    out = []
+    for pi, p in enumerate(platforms):
+        try:
+            devices = p.get_devices()
+        except cl.Error:
+            continue
+        out.extend(DeviceInfo(pi, di, d, p.name.strip()) for di, d in enumerate(devices))
+    return out
+
+
+def kernels_build(info: DeviceInfo) -> tuple[bool, str]:
+    """Whether volcl's render kernel (every feature on) builds on this device, and why not."""
+    from .program import build_program
+    from .features import all_features
+    try:
+        ctx = cl.Context([info.device])
+        build_program(ctx, all_features())
+        return True, ""
+    except Exception as exc:  # any driver failure means: not usable
+        text = str(exc).strip().splitlines()
+        return False, text[-1] if text else type(exc).__name__
+
+
+def _match(devs: list[DeviceInfo], sel: str) -> list[DeviceInfo]:
+    sel = sel.strip()
+    if sel.lower() in ("cpu", "gpu"):
+        return [d for d in devs if d.kind == sel.lower()]
+    if ":" in sel and all(part.isdigit() for part in sel.split(":", 1)):
+        return [d for d in devs if d.key == sel]
+    if sel.isdigit():
+        return [d for d in devs if d.key == f"0:{sel}"]
+    return [d for d in devs if sel.lower() in d.name.lower() or sel.lower() in d.platform_name.lower()]
+
+
+def choose(selector: str | None = None) -> DeviceInfo:
+    """The device to render on: `selector` (or VOLCL_DEVICE) narrows the candidates; among them the
+    first whose kernels build wins, GPUs before other devices."""
+    selector = selector or os.environ.get("VOLCL_DEVICE") or None
+    devs = list_devices()
+    if not devs:
+        raise VolclError(f"no OpenCL device found; {INSTALL_HINT}")
+    if selector:
+        candidates = _match(devs, selector)
+        if not candidates:
+            listing = ", ".join(f"{d.key} {d.name} ({d.kind})" for d in devs)
+            raise VolclError(f"no OpenCL device matches --device {selector!r}; available: {listing}; "
+                             "select by index 'P:D', a name substring, 'cpu' or 'gpu'")
+    else:
+        candidates = sorted(devs, key=lambda d: d.kind != "gpu")
+    failures = []
+    for d in candidates:
+        ok, why = kernels_build(d)
+        if ok:
+            return d
+        failures.append(f"{d.key} {d.name}: {why}")
+    raise VolclError("volcl's kernels build on no OpenCL device (" + "; ".join(failures) + f"); {INSTALL_HINT}")

@@ -1,0 +1,76 @@
+"""numpy structured dtypes that mirror kernels/types.h byte for byte.
+
+Shared structs hold no float3 (16-byte aligned in OpenCL C, packed in numpy); every field is a
+4-byte scalar or an array of them, so both sides agree on offsets without padding rules.
+tests/test_layout.py checks every size and offset against the device compiler with a probe kernel.
+"""
+import numpy as np
+
+f3 = (np.float32, 3)
+
+# Flattened BVH node, depth-first order. Interior (count == 0): left child is the next node,
+# `index` is the right child. Leaf (count > 0): primitives [index, index + count) of the
+# BVH-ordered primitive list.
+BVH_NODE = np.dtype([
+    ("bmin", *f3), ("index", np.int32),
+    ("bmax", *f3), ("count", np.int32),
+])
+
+TRIANGLE = np.dtype([
+    ("p0", *f3), ("shape", np.int32),
+    ("p1", *f3), ("normals", np.int32),
+    ("p2", *f3), ("pad0", np.int32),
+])
+
+TRIANGLE_NORMALS = np.dtype([("n0", *f3), ("n1", *f3), ("n2", *f3), ("pad0", np.int32, 3)])
+
+SPHERE = np.dtype([
+    ("center", *f3), ("radius", np.float32),
+    ("shape", np.int32), ("flip", np.int32), ("pad0", np.int32, 2),
+])
+
+SHAPE_INFO = np.dtype([
+    ("bsdf", np.int32), ("light", np.int32), ("interior", np.int32), ("exterior", np.int32),
+    ("is_transition", np.int32), ("pad0", np.int32, 3),
+])
+
+BSDF_TYPES = {"diffuse": 0, "dielectric": 1, "conductor": 2, "null": 3}
+BSDF = np.dtype([
+    ("type", np.int32), ("twosided", np.int32), ("eta", np.float32), ("conductor_mirror", np.int32),
+    ("color", *f3), ("pad0", np.float32),
+    ("cond_eta", *f3), ("pad1", np.float32),
+    ("cond_k", *f3), ("pad2", np.float32),
+])
+
+LIGHT_TYPES = {"area": 0, "point": 1, "directional": 2, "constant": 3}
+LIGHT = np.dtype([
+    ("type", np.int32), ("tri_start", np.int32), ("tri_count", np.int32), ("sphere", np.int32),
+    ("value", *f3), ("area", np.float32),
+    ("position", *f3), ("pad0", np.float32),
+    ("direction", *f3), ("pad1", np.float32),
+])
+
+MEDIUM_TYPES = {"homogeneous": 0}
+PHASE_TYPES = {"isotropic": 0, "hg": 1}
+MEDIUM = np.dtype([
+    ("type", np.int32), ("phase", np.int32), ("g", np.float32), ("pad0", np.int32),
+    ("sigma_t", *f3), ("pad1", np.float32),
+    ("albedo", *f3), ("pad2", np.float32),
+    ("emission", *f3), ("pad3", np.float32),
+])
+
+RENDER_PARAMS = np.dtype([
+    ("cam_to_world", np.float32, 12), ("tan_half", np.float32, 2),
+    ("near_clip", np.float32), ("far_clip", np.float32),
+    ("width", np.int32), ("height", np.int32), ("max_depth", np.int32), ("rr_depth", np.int32),
+    ("hide_emitters", np.int32), ("specular_chains_only", np.int32), ("camera_medium", np.int32),
+    ("light_count", np.int32), ("env_light", np.int32), ("filter_size", np.int32),
+    ("filter_radius", np.float32), ("seed", np.uint32), ("scene_radius", np.float32),
+    ("scene_center", *f3), ("pad0", np.int32, 4),
+])
+
+# name in kernels/types.h -> dtype, for the layout probe
+SHARED_STRUCTS = {
+    "BvhNode": BVH_NODE, "Triangle": TRIANGLE, "TriangleNormals": TRIANGLE_NORMALS, "Sphere": SPHERE,
+    "ShapeInfo": SHAPE_INFO, "Bsdf": BSDF, "Light": LIGHT, "Medium": MEDIUM, "RenderParams": RENDER_PARAMS,
+}

@@ -1,0 +1,270 @@
+"""A loaded scene turned into the flat arrays the kernels read (see kernels/types.h).
+
+Meshes become one triangle array, spheres their own array, and one BVH covers both. Objects that
+the scene shares (a bsdf or medium referenced twice) are stored once.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import layout
+from .bvh import build_bvh
+from .features import detect
+from .scene.model import Camera, Filter, Scene
+
+FILTER_TABLE_SIZE = 257
+
+
+@dataclass
+class Packed:
+    arrays: dict                    # buffer name -> numpy array, in kernel argument order
+    params: np.ndarray              # RENDER_PARAMS, one record
+    features: dict
+    triangle_count: int = 0
+    sphere_count: int = 0
+    bvh_seconds: float = 0.0
+    stats: dict = field(default_factory=dict)
+
+
+def _index_by_identity(objs):
+    index, out = {}, []
+    for o in objs:
+        if o is not None and id(o) not in index:
+            index[id(o)] = len(out)
+            out.append(o)
+    return index, out
+
+
+def _pack_bsdfs(bsdfs):
+    arr = np.zeros(max(len(bsdfs), 1), layout.BSDF)
+    for i, b in enumerate(bsdfs):
+        r = arr[i]
+        r["type"] = layout.BSDF_TYPES[b.kind]
+        r["twosided"] = int(b.twosided)
+        r["eta"] = b.int_ior / b.ext_ior
+        if b.kind == "diffuse":
+            r["color"] = b.reflectance
+        elif b.kind == "conductor":
+            r["color"] = b.specular_reflectance
+            r["conductor_mirror"] = int(b.eta is None)
+            if b.eta is not None:
+                r["cond_eta"], r["cond_k"] = b.eta, b.k
+    return arr
+
+
+def _pack_media(media):
+    arr = np.zeros(max(len(media), 1), layout.MEDIUM)
+    for i, m in enumerate(media):
+        r = arr[i]
+        r["type"] = layout.MEDIUM_TYPES[m.kind]
+        r["phase"] = layout.PHASE_TYPES[m.phase.kind]
+        r["g"] = m.phase.g if m.phase.kind == "hg" else 0.0
+        sigma_t = np.asarray(m.sigma_t, dtype=np.float64) * m.scale
+        albedo = np.asarray(m.albedo, dtype=np.float64)
+        r["sigma_t"], r["albedo"] = sigma_t, albedo
+        if m.radiance is not None:
+            r["emission"] = sigma_t * (1.0 - albedo) * m.radiance
+    return arr
+
+
+def _triangles(scene, shape_index):
+    """Every mesh's triangles, the per-triangle shape index, and packed shading normals."""
+    verts, shapes, normals, normal_owner = [], [], [], []
+    for s in scene.shapes:
+        if s.kind != "mesh":
+            continue
+        tri = s.vertices[s.faces]                       # (m, 3, 3)
+        verts.append(tri)
+        shapes.append(np.full(len(tri), shape_index[id(s)], np.int32))
+        has = s.normals is not None
+        normals.append(s.normals[s.faces] if has else np.zeros((0, 3, 3)))
+        normal_owner.append(np.full(len(tri), has))
+    if not verts:
+        return np.zeros((0, 3, 3)), np.zeros(0, np.int32), np.zeros((0, 3, 3)), np.zeros(0, bool)
+    return (np.concatenate(verts), np.concatenate(shapes), np.concatenate(normals),
+            np.concatenate(normal_owner))
+
+
+def filter_table(f: Filter, size: int = FILTER_TABLE_SIZE) -> np.ndarray:
+    """Inverse CDF of the 1D reconstruction filter on [-radius, radius], tabulated for the kernel."""
+    r = f.radius
+    x = np.linspace(-r, r, 4097)
+    if f.kind == "box":
+        w = np.ones_like(x)
+    elif f.kind == "tent":
+        w = np.maximum(0.0, 1.0 - np.abs(x) / r)
+    else:   # gaussian, shifted to reach zero at the radius (Mitsuba and Nori)
+        w = np.maximum(0.0, np.exp(-x * x / (2 * f.stddev ** 2)) - math.exp(-r * r / (2 * f.stddev ** 2)))
+    cdf = np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(x))])
+    cdf /= cdf[-1]
+    u = np.linspace(0.0, 1.0, size)
+    # np.interp needs increasing xp: drop flat stretches (zero weight) of the cdf
+    keep = np.concatenate([[True], np.diff(cdf) > 0])
+    return np.interp(u, cdf[keep], x[keep]).astype(np.float32)
+
+
+def camera_tangents(cam: Camera) -> tuple[float, float]:
+    """tan(fov/2) along x and y from Mitsuba's fov_axis rules."""
+    w, h = cam.width, cam.height
+    t = math.tan(math.radians(cam.fov) / 2)
+    axis = cam.fov_axis
+    if axis == "smaller":
+        axis = "x" if w <= h else "y"
+    elif axis == "larger":
+        axis = "x" if w >= h else "y"
+    if axis == "x":
+        tx = t
+    elif axis == "y":
+        tx = t * w / h
+    else:   # diagonal
+        tx = t * w / math.hypot(w, h)
+    return tx, tx * h / w
+
+
+def pack(scene: Scene, features: dict | None = None, max_leaf: int = 4) -> Packed:
+    import time
+    shape_index = {id(s): i for i, s in enumerate(scene.shapes)}
+    bsdf_index, bsdfs = _index_by_identity(s.bsdf for s in scene.shapes)
+    medium_index, media = _index_by_identity(
+        [scene.camera.medium] + [m for s in scene.shapes for m in (s.interior, s.exterior)] + list(scene.media))
+    mi = lambda m: -1 if m is None else medium_index[id(m)]     # noqa: E731
+
+    tri_v, tri_shape, tri_n, tri_has_n = _triangles(scene, shape_index)
+    ntri = len(tri_v)
+    tris = np.zeros(max(ntri, 1), layout.TRIANGLE)
+    if ntri:
+        tris["p0"][:ntri], tris["p1"][:ntri], tris["p2"][:ntri] = tri_v[:, 0], tri_v[:, 1], tri_v[:, 2]
+        tris["shape"][:ntri] = tri_shape
+        nidx = np.cumsum(tri_has_n) - 1
+        tris["normals"][:ntri] = np.where(tri_has_n, nidx, -1)
+    normals = np.zeros(max(int(tri_has_n.sum()), 1), layout.TRIANGLE_NORMALS)
+    if tri_has_n.any():
+        sel = tri_n
+        normals["n0"][:len(sel)], normals["n1"][:len(sel)], normals["n2"][:len(sel)] = sel[:, 0], sel[:, 1], sel[:, 2]
+
+    sphere_shapes = [s for s in scene.shapes if s.kind == "sphere"]
+    spheres = np.zeros(max(len(sphere_shapes), 1), layout.SPHERE)
+    for i, s in enumerate(sphere_shapes):
+        spheres[i]["center"], spheres[i]["radius"] = s.center, s.radius
+        spheres[i]["shape"], spheres[i]["flip"] = shape_index[id(s)], int(s.flip_normals)
+    sphere_of_shape = {id(s): i for i, s in enumerate(sphere_shapes)}
+
+    # lights: area lights first (one per emitting shape), then the scene's other emitters
+    lights, light_cdf, light_tris = [], [], []
+    shape_light = {}
+    first_tri = {}
+    offset = 0
+    for s in scene.shapes:
+        if s.kind == "mesh":
+            first_tri[id(s)] = offset
+            offset += len(s.faces)
+    for s in scene.shapes:
+        if s.emitter_radiance is None:
+            continue
+        rec = np.zeros((), layout.LIGHT)
+        rec["type"] = layout.LIGHT_TYPES["area"]
+        rec["value"] = s.emitter_radiance
+        rec["sphere"] = -1
+        if s.kind == "sphere":
+            rec["sphere"] = sphere_of_shape[id(s)]
+            rec["area"] = 4 * math.pi * s.radius ** 2
+        else:
+            v = s.vertices[s.faces]
+            areas = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+            keep = np.nonzero(areas > 0)[0]
+            total = areas[keep].sum()
+            rec["area"] = total
+            rec["tri_start"], rec["tri_count"] = len(light_cdf), len(keep)
+            cdf = np.cumsum(areas[keep]) / total
+            cdf[-1] = 1.0
+            light_cdf.extend(cdf.tolist())
+            light_tris.extend((first_tri[id(s)] + keep).tolist())
+        shape_light[id(s)] = len(lights)
+        lights.append(rec)
+    env_light = -1
+    for e in scene.emitters:
+        rec = np.zeros((), layout.LIGHT)
+        rec["type"] = layout.LIGHT_TYPES[e.kind]
+        rec["value"] = e.value
+        rec["sphere"] = -1
+        if e.kind == "point":
+            rec["position"] = e.position
+        elif e.kind == "directional":
+            rec["direction"] = np.asarray(e.direction) / np.linalg.norm(e.direction)
+        elif e.kind == "constant":
+            if env_light >= 0:      # two constant environments add up to one
+                lights[env_light]["value"] = lights[env_light]["value"] + np.asarray(e.value, np.float32)
+                continue
+            env_light = len(lights)
+        lights.append(rec)
+    light_arr = np.zeros(max(len(lights), 1), layout.LIGHT)
+    for i, rec in enumerate(lights):
+        light_arr[i] = rec
+
+    shape_arr = np.zeros(max(len(scene.shapes), 1), layout.SHAPE_INFO)
+    for i, s in enumerate(scene.shapes):
+        r = shape_arr[i]
+        r["bsdf"] = bsdf_index[id(s.bsdf)]
+        r["light"] = shape_light.get(id(s), -1)
+        r["interior"], r["exterior"] = mi(s.interior), mi(s.exterior)
+        r["is_transition"] = int(s.interior is not None or s.exterior is not None)
+
+    # one BVH over triangles (codes >= 0) and spheres (codes < 0)
+    lo = [tri_v.min(axis=1)] if ntri else []
+    hi = [tri_v.max(axis=1)] if ntri else []
+    codes = [np.arange(ntri, dtype=np.int32)]
+    if sphere_shapes:
+        c = np.array([s.center for s in sphere_shapes], np.float64)
+        r = np.array([s.radius for s in sphere_shapes], np.float64)[:, None]
+        lo.append(c - r)
+        hi.append(c + r)
+        codes.append(-1 - np.arange(len(sphere_shapes), dtype=np.int32))
+    codes = np.concatenate(codes)
+    t0 = time.perf_counter()
+    if len(codes):
+        nodes, order = build_bvh(np.concatenate(lo), np.concatenate(hi), max_leaf=max_leaf)
+        prim_ids = codes[order].astype(np.int32)
+        bounds_lo, bounds_hi = np.concatenate(lo).min(0), np.concatenate(hi).max(0)
+    else:
+        nodes = np.zeros(1, layout.BVH_NODE)
+        nodes["bmin"], nodes["bmax"], nodes["count"] = np.inf, -np.inf, 1
+        prim_ids = np.zeros(1, np.int32)
+        bounds_lo = bounds_hi = np.zeros(3)
+    bvh_seconds = time.perf_counter() - t0
+
+    cam = scene.camera
+    params = np.zeros((), layout.RENDER_PARAMS)
+    m = np.asarray(cam.to_world, np.float64)
+    params["cam_to_world"] = m[:3, :4].reshape(12)
+    params["tan_half"] = camera_tangents(cam)
+    params["near_clip"], params["far_clip"] = cam.near_clip, cam.far_clip
+    params["width"], params["height"] = cam.width, cam.height
+    integ = scene.integrator
+    params["max_depth"] = integ.max_depth
+    params["rr_depth"] = integ.rr_depth
+    params["hide_emitters"] = int(integ.hide_emitters)
+    params["specular_chains_only"] = int(integ.specular_chains_only)
+    params["camera_medium"] = mi(cam.medium)
+    params["light_count"] = len(lights)
+    params["env_light"] = env_light
+    params["filter_size"] = FILTER_TABLE_SIZE
+    params["filter_radius"] = cam.rfilter.radius
+    params["seed"] = scene.seed & 0xFFFFFFFF
+    center = 0.5 * (bounds_lo + bounds_hi)
+    params["scene_center"] = center
+    params["scene_radius"] = 0.5 * float(np.linalg.norm(bounds_hi - bounds_lo))
+
+    arrays = {
+        "nodes": nodes, "prim_ids": prim_ids, "triangles": tris, "normals": normals, "spheres": spheres,
+        "shapes": shape_arr, "bsdfs": _pack_bsdfs(bsdfs), "lights": light_arr,
+        "light_tri_cdf": np.asarray(light_cdf or [1.0], np.float32),
+        "light_tris": np.asarray(light_tris or [0], np.int32),
+        "media": _pack_media(media),
+        "params": params.reshape(1),
+        "filter_table": filter_table(cam.rfilter),
+    }
+    feats = features if features is not None else detect(scene)
+    return Packed(arrays, params, feats, ntri, len(sphere_shapes), bvh_seconds)

@@ -1,0 +1,68 @@
+"""Finding the OpenCL sources and building the render program once per feature set.
+
+Sources live in the top-level kernels/ folder of a checkout and ship inside the installed package
+as volcl/kernels; they are compiled with -I so compiler messages name the real file and line.
+Builds are cached in memory per (context, feature set) and on disk by pyopencl and the driver; the
+options carry a hash of every kernel file, so an edited header can never reuse a stale binary.
+"""
+from __future__ import annotations
+
+import hashlib
+import time
+from functools import lru_cache
+from pathlib import Path
+
+from . import features as feat
+from .device import cl
+
+ENTRY_FILE = "render.cl"
+
+
+@lru_cache(maxsize=None)
+def kernels_dir() -> Path:
+    here = Path(__file__).resolve().parent
+    for candidate in (here / "kernels", here.parent / "kernels"):
+        if (candidate / ENTRY_FILE).is_file():
+            return candidate
+    raise FileNotFoundError(f"volcl's OpenCL sources ({ENTRY_FILE}) are neither in {here / 'kernels'} "
+                            f"nor in {here.parent / 'kernels'}; the installation is incomplete")
+
+
+@lru_cache(maxsize=None)
+def sources_hash() -> str:
+    h = hashlib.sha256()
+    for f in sorted(kernels_dir().glob("*")):
+        if f.suffix in (".cl", ".h"):
+            h.update(f.name.encode())
+            h.update(f.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def build_options(features: dict[str, bool], extra: tuple[str, ...] = ()) -> list[str]:
+    return ([f"-I{kernels_dir()}", "-cl-std=CL1.2", f"-DVOLCL_SOURCE_HASH=0x{sources_hash()}"]
+            + feat.defines(features) + list(extra))
+
+
+_cache: dict = {}
+last_build_seconds: dict = {}
+
+
+def build_program(ctx, features: dict[str, bool], source_file=ENTRY_FILE,
+                  extra: tuple[str, ...] = ()):
+    """The built program for this context and feature set; built at most once per process."""
+    key = (id(ctx), str(source_file), tuple(sorted(features.items())), extra)
+    prog = _cache.get(key)
+    if prog is None:
+        # test kernels pass a path of their own; they include volcl's headers through -I
+        path = Path(source_file) if Path(source_file).is_absolute() else kernels_dir() / source_file
+        src = path.read_text()
+        t0 = time.perf_counter()
+        prog = cl.Program(ctx, src).build(options=build_options(features, extra))
+        last_build_seconds[key] = time.perf_counter() - t0
+        _cache[key] = (prog, ctx)   # keep ctx alive so id(ctx) is never reused by another context
+        return prog
+    return prog[0]
+
+
+def build_seconds(ctx, features, source_file: str = ENTRY_FILE, extra: tuple[str, ...] = ()) -> float:
+    return last_build_seconds.get((id(ctx), str(source_file), tuple(sorted(features.items())), extra), 0.0)
