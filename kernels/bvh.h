@@ -16,15 +16,17 @@ typedef struct {
     float b1, b2;   /* barycentrics of p1 and p2 on triangles */
 } Hit;
 
-/* Per-ray constants of the watertight test. */
+/* Per-ray constants of the watertight test: the axis permutation (kz = the direction's largest
+ * component), the shear, and the origin in permuted order. */
 typedef struct {
     int kx, ky, kz;
     float sx, sy, sz;
+    float ox, oy, oz;
 } Shear;
 
 inline float component(float3 v, int k) { return k == 0 ? v.x : (k == 1 ? v.y : v.z); }
 
-inline Shear shear_make(float3 d) {
+inline Shear shear_make(float3 o, float3 d) {
     Shear s;
     float3 a = fabs(d);
     s.kz = (a.x > a.y) ? (a.x > a.z ? 0 : 2) : (a.y > a.z ? 1 : 2);
@@ -35,19 +37,24 @@ inline Shear shear_make(float3 d) {
     s.sx = component(d, s.kx) / dz;
     s.sy = component(d, s.ky) / dz;
     s.sz = 1.0f / dz;
+    s.ox = component(o, s.kx);
+    s.oy = component(o, s.ky);
+    s.oz = component(o, s.kz);
     return s;
 }
 
-inline bool triangle_intersect(__global const Triangle *tri, float3 o, const Shear *sh, float tmax,
+/* Vertices are read in the ray's permuted axis order straight from memory (p[k] with a per-ray k),
+ * which costs an address computation instead of a select chain per component. */
+__attribute__((always_inline))
+inline bool triangle_intersect(__global const Triangle *tri, const Shear *sh, float tmax,
                                float *t_out, float *b1_out, float *b2_out) {
     /* the edge functions must round identically for the two triangles sharing an edge, and a fused
      * multiply-add in one of them breaks that (and makes zero-size triangles report hits) */
 #pragma OPENCL FP_CONTRACT OFF
-    float3 a = vload_f3(tri->p0) - o, b = vload_f3(tri->p1) - o, c = vload_f3(tri->p2) - o;
-    float az = component(a, sh->kz), bz = component(b, sh->kz), cz = component(c, sh->kz);
-    float ax = component(a, sh->kx) - sh->sx * az, ay = component(a, sh->ky) - sh->sy * az;
-    float bx = component(b, sh->kx) - sh->sx * bz, by = component(b, sh->ky) - sh->sy * bz;
-    float cx = component(c, sh->kx) - sh->sx * cz, cy = component(c, sh->ky) - sh->sy * cz;
+    float az = tri->p0[sh->kz] - sh->oz, bz = tri->p1[sh->kz] - sh->oz, cz = tri->p2[sh->kz] - sh->oz;
+    float ax = (tri->p0[sh->kx] - sh->ox) - sh->sx * az, ay = (tri->p0[sh->ky] - sh->oy) - sh->sy * az;
+    float bx = (tri->p1[sh->kx] - sh->ox) - sh->sx * bz, by = (tri->p1[sh->ky] - sh->oy) - sh->sy * bz;
+    float cx = (tri->p2[sh->kx] - sh->ox) - sh->sx * cz, cy = (tri->p2[sh->ky] - sh->oy) - sh->sy * cz;
     float u = cx * by - cy * bx;
     float v = ax * cy - ay * cx;
     float w = bx * ay - by * ax;
@@ -90,16 +97,24 @@ inline bool sphere_intersect(__global const Sphere *sp, float3 o, float3 d, floa
 }
 
 /* Entry distance of the ray into a node's box, or INF when it misses within [0, tmax]. The exit
- * distance is widened by a few ulps so rounding never culls a box the ray grazes. */
+ * distance is widened by a few ulps so rounding never culls a box the ray grazes. inv_d is finite
+ * (see bvh_trace), so no slab product is NaN and plain compares can replace fmin/fmax, whose NaN
+ * rules cost extra instructions on every node. */
+__attribute__((always_inline))
 inline float node_entry(__global const BvhNode *n, float3 o, float3 inv_d, float tmax) {
     float3 t0 = (vload_f3(n->bmin) - o) * inv_d;
     float3 t1 = (vload_f3(n->bmax) - o) * inv_d;
-    float3 lo = fmin(t0, t1), hi = fmax(t0, t1);
-    float enter = fmax(fmax(lo.x, lo.y), fmax(lo.z, 0.0f));
-    float leave = fmin(fmin(hi.x, hi.y), fmin(hi.z, tmax)) * 1.0000004f;
+    float3 lo = select(t1, t0, t0 < t1), hi = select(t0, t1, t0 < t1);
+    float enter = lo.x > lo.y ? lo.x : lo.y;
+    enter = enter > lo.z ? enter : lo.z;
+    enter = enter > 0.0f ? enter : 0.0f;
+    float leave = hi.x < hi.y ? hi.x : hi.y;
+    leave = leave < hi.z ? leave : hi.z;
+    leave = (leave < tmax ? leave : tmax) * 1.0000004f;
     return enter <= leave ? enter : VOLCL_INF;
 }
 
+__attribute__((always_inline))
 inline bool prim_intersect(const SceneData *sc, int code, float3 o, float3 d, const Shear *sh, float tmax,
                            Hit *hit) {
     float t, b1 = 0.0f, b2 = 0.0f;
@@ -108,7 +123,7 @@ inline bool prim_intersect(const SceneData *sc, int code, float3 o, float3 d, co
         if (!sphere_intersect(&sc->spheres[-code - 1], o, d, tmax, &t)) return false;
     } else
 #endif
-    if (!triangle_intersect(&sc->triangles[code], o, sh, tmax, &t, &b1, &b2)) return false;
+    if (!triangle_intersect(&sc->triangles[code], sh, tmax, &t, &b1, &b2)) return false;
     hit->t = t;
     hit->prim = code;
     hit->b1 = b1;
@@ -119,8 +134,10 @@ inline bool prim_intersect(const SceneData *sc, int code, float3 o, float3 d, co
 /* Closest hit in (0, tmax). any_hit: return at the first hit found (shadow rays). An empty scene is
  * uploaded as one leaf with an inverted box, which no ray enters. */
 inline bool bvh_trace(const SceneData *sc, float3 o, float3 d, float tmax, bool any_hit, Hit *hit) {
-    Shear sh = shear_make(d);
-    float3 inv_d = 1.0f / d;
+    Shear sh = shear_make(o, d);
+    /* a zero direction component becomes a tiny one of the same sign: its slab then spans
+     * +-1e30 instead of producing 0 * INF = NaN for an origin on the slab plane */
+    float3 inv_d = 1.0f / select(d, copysign((float3)(1e-30f), d), fabs(d) < (float3)(1e-30f));
     int stack[VOLCL_BVH_STACK];
     int top = 0;
     int node = 0;

@@ -50,10 +50,10 @@ inline float phase_sample(__global const Medium *m, float3 d_in, float2 u, float
     if (m->phase == PHASE_HG) {
         float c = phase_hg_sample_cos(m->g, u.x);
         float sn = sqrt(fmax(0.0f, 1.0f - c * c));
-        float phi = 2.0f * VOLCL_PI * u.y;
+        float cp = native_cos(2.0f * VOLCL_PI * u.y), sp = native_sin(2.0f * VOLCL_PI * u.y);
         float3 s, t;
         make_frame(d_in, &s, &t);
-        *d_out = normalize(frame_to_world((float3)(sn * cos(phi), sn * sin(phi), c), s, t, d_in));
+        *d_out = normalize(frame_to_world((float3)(sn * cp, sn * sp, c), s, t, d_in));
         return phase_hg_eval(m->g, c);
     }
 #endif

@@ -15,7 +15,8 @@ inline float2 sample_concentric_disk(float2 u) {
         r = o.y;
         theta = (VOLCL_PI / 2.0f) - (VOLCL_PI / 4.0f) * (o.x / o.y);
     }
-    return r * (float2)(cos(theta), sin(theta));
+    float c = native_cos(theta), sn = native_sin(theta);
+    return r * (float2)(c, sn);
 }
 
 inline float3 sample_cosine_hemisphere(float2 u) {
@@ -29,8 +30,8 @@ inline float sample_cosine_hemisphere_pdf(float3 v) { return v.z > 0.0f ? v.z * 
 inline float3 sample_uniform_sphere(float2 u) {
     float z = 1.0f - 2.0f * u.x;
     float r = sqrt(fmax(0.0f, 1.0f - z * z));
-    float phi = 2.0f * VOLCL_PI * u.y;
-    return (float3)(r * cos(phi), r * sin(phi), z);
+    float c = native_cos(2.0f * VOLCL_PI * u.y), s = native_sin(2.0f * VOLCL_PI * u.y);
+    return (float3)(r * c, r * s, z);
 }
 
 inline float sample_uniform_sphere_pdf(void) { return VOLCL_INV_4PI; }
@@ -45,8 +46,8 @@ inline float2 sample_uniform_triangle(float2 u) {
 inline float3 sample_uniform_cone(float2 u, float cos_max) {
     float cos_t = 1.0f - u.x * (1.0f - cos_max);
     float sin_t = sqrt(fmax(0.0f, 1.0f - cos_t * cos_t));
-    float phi = 2.0f * VOLCL_PI * u.y;
-    return (float3)(sin_t * cos(phi), sin_t * sin(phi), cos_t);
+    float c = native_cos(2.0f * VOLCL_PI * u.y), s = native_sin(2.0f * VOLCL_PI * u.y);
+    return (float3)(sin_t * c, sin_t * s, cos_t);
 }
 
 inline float sample_uniform_cone_pdf(float cos_max) { return 1.0f / (2.0f * VOLCL_PI * (1.0f - cos_max)); }
