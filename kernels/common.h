@@ -54,7 +54,9 @@ inline float power_heuristic(float pdf_a, float pdf_b) {
 inline float3 offset_origin(float3 p, float3 ng, float3 d) {
     float mag = fmax(fmax(fabs(p.x), fabs(p.y)), fmax(fabs(p.z), 1.0f));
     float eps = mag * 1e-5f;
-    return p + (dot(d, ng) >= 0.0f ? eps : -eps) * ng;
+    /* the same side rule as medium_after (> 0: the side ng points to), so a direction exactly in the
+     * tangent plane starts on the side whose medium it is given */
+    return p + (dot(d, ng) > 0.0f ? eps : -eps) * ng;
 }
 
 #endif

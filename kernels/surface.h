@@ -29,15 +29,24 @@ inline SurfacePoint surface_point(const SceneData *sc, const Hit *h, float3 o, f
 #endif
     __global const Triangle *tri = &sc->triangles[h->prim];
     float3 p0 = vload_f3(tri->p0), p1 = vload_f3(tri->p1), p2 = vload_f3(tri->p2);
-    float b0 = 1.0f - h->b1 - h->b2;
-    /* barycentric interpolation stays on the triangle's plane, unlike o + t d */
-    s.p = b0 * p0 + h->b1 * p1 + h->b2 * p2;
+    /* A hit exactly on an edge would leave the next ray's origin on the neighbouring face's plane
+     * too; a direction through that face then crosses it at t = 0, which the intersection test
+     * rejects, and the path slips out of a closed mesh unseen (at a box's corner edges, offsetting
+     * along this face's normal does not help). Pulling the point a hair into the triangle's
+     * interior gives every neighbour a positive distance. Barycentric interpolation also keeps the
+     * point on the triangle's plane, unlike o + t d. */
+    float b1 = fmax(h->b1, 1e-5f), b2 = fmax(h->b2, 1e-5f), b0 = fmax(1.0f - h->b1 - h->b2, 1e-5f);
+    float inv_sum = 1.0f / (b0 + b1 + b2);
+    b0 *= inv_sum;
+    b1 *= inv_sum;
+    b2 *= inv_sum;
+    s.p = b0 * p0 + b1 * p1 + b2 * p2;
     s.ng = normalize(cross(p1 - p0, p2 - p0));
     s.ns = s.ng;
 #if VOLCL_HAS_SHADING_NORMALS
     if (tri->normals >= 0) {
         __global const TriangleNormals *tn = &sc->normals[tri->normals];
-        float3 n = b0 * vload_f3(tn->n0) + h->b1 * vload_f3(tn->n1) + h->b2 * vload_f3(tn->n2);
+        float3 n = b0 * vload_f3(tn->n0) + b1 * vload_f3(tn->n1) + b2 * vload_f3(tn->n2);
         float len = length(n);
         if (len > 0.0f) s.ns = n / len;
     }

@@ -23,6 +23,7 @@ def random_scene(rng, n_tri=3000, n_sph=40):
 def upload_arrays(tris, sph_c, sph_r):
     t = np.zeros(len(tris), layout.TRIANGLE)
     t["p0"], t["p1"], t["p2"] = tris[:, 0], tris[:, 1], tris[:, 2]
+    t["normals"] = -1
     s = np.zeros(max(len(sph_c), 1), layout.SPHERE)
     s["center"][:len(sph_c)], s["radius"][:len(sph_c)] = sph_c, sph_r
     lo = np.concatenate([tris.min(1), sph_c - sph_r[:, None]])
