@@ -1,0 +1,338 @@
+"""Every kind of user error: a VolclError whose message names the file, the line and the culprit."""
+import time
+
+import numpy as np
+import pytest
+
+from volcl.errors import VolclError
+from volcl.scene import load
+from volcl.scene.volfile import write_vol
+
+M = '<scene version="3.0.0">\n{}\n</scene>\n'      # body starts on line 2
+N = '<scene>\n{}\n</scene>\n'
+NORI_OK = '<integrator type="path_mis"/><camera type="perspective"/>'
+
+
+def expect_error(tmp_path, text: str, line, *fragments, defines=None, name="scene.xml"):
+    path = tmp_path / name
+    path.write_text(text)
+    with pytest.raises(VolclError) as info:
+        load(path, defines)
+    message = str(info.value)
+    assert name in message, message
+    if line is not None:
+        assert f"{name}:{line}:" in message, message
+    for fragment in fragments:
+        assert fragment in message, message
+    return message
+
+
+MITSUBA_CASES = {
+    "unknown element": ('<foo/>', 2, "<foo>", "supported here", "<shape>"),
+    "unknown element in shape": ('<shape type="cube">\n<texture type="bitmap"/>\n</shape>', 3,
+                                 "<texture>", "<bsdf>", "<emitter>", "<medium>"),
+    "unknown plugin type": ('<shape type="cube">\n<bsdf type="plastic"/>\n</shape>', 3,
+                            "'plastic'", "conductor, dielectric, diffuse, null, twosided"),
+    "unknown shape type": ('<shape type="serialized"/>', 2, "'serialized'", "obj", "sphere"),
+    "unknown parameter": ('<bsdf type="diffuse">\n<float name="roughness" value="0.1"/>\n</bsdf>',
+                          3, "'roughness'", "supported: reflectance"),
+    "string where float": ('<sensor type="perspective">\n<string name="fov" value="wide"/>\n'
+                           '</sensor>', 3, "'fov'", "<float>", "<string>"),
+    "abc as float": ('<sensor type="perspective"><float name="fov" value="abc"/></sensor>', 2,
+                     "'abc'", "not a finite number"),
+    "non-finite float": ('<shape type="cube"><emitter type="area"><rgb name="radiance" '
+                         'value="inf"/></emitter></shape>', 2, "'inf'"),
+    "rgb with two values": ('<bsdf type="diffuse"><rgb name="reflectance" value="0.1, 0.2"/>'
+                            '</bsdf>', 2, "'0.1, 0.2'", "1 or 3"),
+    "spectrum pairs": ('<bsdf type="diffuse"><spectrum name="reflectance" '
+                       'value="400:0.1, 700:0.5"/></bsdf>', 2, "single constant"),
+    "spectrum two values": ('<bsdf type="diffuse"><spectrum name="reflectance" value="0.1 0.2"/>'
+                            '</bsdf>', 2, "'0.1 0.2'"),
+    "bad point": ('<shape type="sphere"><point name="center" value="1, 2"/></shape>', 2,
+                  "'1, 2'"),
+    "bad boolean": ('<shape type="cube"><boolean name="flip_normals" value="yes"/></shape>', 2,
+                    "'yes'", "true or false"),
+    "bad integer": ('<integrator type="path"><integer name="max_depth" value="1.5"/>'
+                    '</integrator>', 2, "'1.5'", "not an integer"),
+    "huge integer": ('<integrator type="path"><integer name="max_depth" value="99999999999"/>'
+                     '</integrator>', 2, "99999999999", "32-bit"),
+    "very long integer": ('<integrator type="path"><integer name="max_depth" value="%s"/>'
+                          '</integrator>' % ("9" * 5000), 2, "32-bit"),
+    "non-ascii digit": ('<integrator type="path"><integer name="max_depth" value="\u0663"/>'
+                        '</integrator>', 2, "not an integer"),
+    "undefined parameter": ('<integrator type="path">\n<integer name="max_depth" value="$depth"/>'
+                            '\n</integrator>', 3, "$depth"),
+    "ref to unknown id": ('<shape type="cube">\n<ref id="nope"/>\n</shape>', 3, "'nope'"),
+    "ref before definition": ('<shape type="cube"><ref id="b"/></shape>\n'
+                              '<bsdf type="diffuse" id="b"/>', 2, "unknown id 'b'"),
+    "duplicate id": ('<bsdf type="diffuse" id="a"/>\n<bsdf type="null" id="a"/>', 3,
+                     "duplicate id 'a'", "line 2"),
+    "ref of the wrong kind": ('<bsdf type="diffuse" id="b"/>\n<sensor type="perspective">'
+                              '<ref id="b"/></sensor>', 3, "bsdf is not allowed inside",
+                              "perspective"),
+    "ref at scene level": ('<bsdf type="diffuse" id="b"/>\n<ref id="b"/>', 3, "<ref>"),
+    "missing mesh file": ('<shape type="obj">\n<string name="filename" value="missing.obj"/>\n'
+                          '</shape>', 3, "missing.obj", "not found"),
+    "sphere non-uniform scale": ('<shape type="sphere">\n<transform name="to_world">'
+                                 '<scale value="1, 2, 1"/></transform>\n</shape>', 3,
+                                 "similarity", "non-uniform"),
+    "negative radiance": ('<shape type="cube"><emitter type="area">\n<rgb name="radiance" '
+                          'value="-1"/></emitter></shape>', 3, "'radiance' must be >= 0"),
+    "negative intensity": ('<emitter type="point"><rgb name="intensity" value="1 -1 1"/>'
+                           '</emitter>', 2, "'intensity'", ">= 0"),
+    "albedo above one": ('<medium type="homogeneous">\n<float name="albedo" value="1.5"/>'
+                         '</medium>', 3, "'albedo'", "[0, 1]"),
+    "negative sigma_t": ('<medium type="homogeneous"><rgb name="sigma_t" value="1, -2, 1"/>'
+                         '</medium>', 2, "'sigma_t'", ">= 0"),
+    "g out of range": ('<medium type="homogeneous"><phase type="hg">\n<float name="g" '
+                       'value="1"/></phase></medium>', 3, "-1 < g < 1"),
+    "scale not positive": ('<medium type="homogeneous"><float name="scale" value="0"/>'
+                           '</medium>', 2, "'scale' must be > 0"),
+    "twosided with two bsdfs": ('<bsdf type="twosided">\n<bsdf type="diffuse"/>'
+                                '<bsdf type="diffuse"/></bsdf>', 2, "exactly one"),
+    "twosided dielectric": ('<bsdf type="twosided">\n<bsdf type="dielectric"/></bsdf>', 3,
+                            "dielectric", "transmission"),
+    "named conductor": ('<bsdf type="conductor"><string name="material" value="Au"/></bsdf>', 2,
+                        "'Au'", '"none"'),
+    "unknown ior name": ('<bsdf type="dielectric"><string name="int_ior" value="glass"/></bsdf>',
+                         2, "'glass'", "bk7", "fused silica"),
+    "area emitter at top level": ('<emitter type="area"/>', 2, "inside the <shape>"),
+    "point emitter in shape": ('<shape type="cube">\n<emitter type="point"/></shape>', 3,
+                               "only an area emitter"),
+    "medium without interior name": ('<shape type="cube">\n<medium type="homogeneous"/></shape>',
+                                     3, "interior", "exterior"),
+    "two interiors": ('<shape type="cube"><medium type="homogeneous" name="interior"/>\n'
+                      '<medium type="homogeneous" name="interior"/></shape>', 3, "already"),
+    "two integrators": ('<integrator type="path"/>\n<integrator type="path"/>', 3,
+                        "at most one integrator"),
+    "two sensors": ('<sensor type="perspective"/>\n<sensor type="perspective"/>', 3,
+                    "at most one sensor"),
+    "unknown transform op": ('<shape type="cube"><transform name="to_world">\n<shear/>'
+                             '</transform></shape>', 3, "<shear>", "lookat"),
+    "singular transform": ('<shape type="cube">\n<transform name="to_world"><scale value="0"/>'
+                           '</transform></shape>', 3, "singular"),
+    "lookat origin is target": ('<sensor type="perspective"><transform name="to_world">\n'
+                                '<lookat origin="1,1,1" target="1,1,1"/></transform></sensor>',
+                                3, "coincide"),
+    "lookat up parallel": ('<sensor type="perspective"><transform name="to_world">\n'
+                           '<lookat origin="0,0,0" target="0,1,0" up="0,2,0"/></transform>'
+                           '</sensor>', 3, "parallel"),
+    "rotate zero axis": ('<shape type="cube"><transform name="to_world">\n'
+                         '<rotate angle="30"/></transform></shape>', 3, "axis is zero"),
+    "rotate without angle": ('<shape type="cube"><transform name="to_world">\n'
+                             '<rotate x="1"/></transform></shape>', 3, "'angle'"),
+    "matrix wrong count": ('<shape type="cube"><transform name="to_world">\n'
+                           '<matrix value="1 2 3"/></transform></shape>', 3, "16 or 9"),
+    "matrix not affine": ('<shape type="cube"><transform name="to_world">\n'
+                          '<matrix value="1 0 0 0 0 1 0 0 0 0 1 0 0 0 1 1"/></transform></shape>',
+                          3, "affine"),
+    "text content": ('<shape type="cube">\n\n  hello\n</shape>', 4, "unexpected text", "hello"),
+    "missing type": ('<shape/>', 2, "missing attribute 'type'", "cube"),
+    "unknown attribute": ('<sensor type="perspective"><float name="fov" value="1" units="deg"/>'
+                          '</sensor>', 2, "'units'"),
+    "unknown object attribute": ('<shape type="cube" size="2"/>', 2, "'size'"),
+    "default not at top level": ('<shape type="cube">\n<default name="a" value="1"/></shape>', 3,
+                                 "<default>"),
+    "fov out of range": ('<sensor type="perspective"><float name="fov" value="180"/></sensor>', 2,
+                         "between 0 and 180"),
+    "film width zero": ('<sensor type="perspective"><film type="hdrfilm">\n'
+                        '<integer name="width" value="0"/></film></sensor>', 3, "width"),
+    "unknown film": ('<sensor type="perspective">\n<film type="specfilm"/></sensor>', 3,
+                     "'specfilm'", "hdrfilm"),
+    "unknown sampler": ('<sensor type="perspective">\n<sampler type="sobol"/></sensor>', 3,
+                        "'sobol'", "independent"),
+    "unknown fov_axis": ('<sensor type="perspective"><float name="fov" value="30"/>\n'
+                         '<string name="fov_axis" value="z"/></sensor>', 3, "'z'", "diagonal"),
+    "near clip beyond far": ('<sensor type="perspective"><float name="near_clip" value="10"/>\n'
+                             '<float name="far_clip" value="1"/></sensor>', 3, "far clip"),
+    "sample count zero": ('<sensor type="perspective"><sampler type="independent">\n'
+                          '<integer name="sample_count" value="0"/></sampler></sensor>', 3,
+                          "'sample_count' must be >= 1"),
+    "max_depth below -1": ('<integrator type="path"><integer name="max_depth" value="-2"/>'
+                           '</integrator>', 2, "'max_depth'"),
+    "parameter given twice": ('<bsdf type="diffuse"><float name="reflectance" value="0.1"/>\n'
+                              '<float name="reflectance" value="0.2"/></bsdf>', 3, "twice"),
+    "position and to_world": ('<emitter type="point"><point name="position" value="0,0,0"/>'
+                              '\n<transform name="to_world"/></emitter>', 3, "not both"),
+    "zero direction": ('<emitter type="directional">\n<vector name="direction" value="0,0,0"/>'
+                       '</emitter>', 3, "zero vector"),
+    "volume with a wrong name": ('<medium type="heterogeneous">\n<volume type="constvolume" '
+                                 'name="density"/></medium>', 3, "sigma_t", "albedo"),
+    "volume in homogeneous": ('<medium type="homogeneous">\n<volume type="constvolume" '
+                              'name="sigma_t"/></medium>', 3, "not allowed"),
+    "color in mitsuba": ('<bsdf type="diffuse">\n<color name="reflectance" value="1"/></bsdf>', 3,
+                         "<color>", "<rgb>"),
+    "fov_axis without fov": ('<sensor type="perspective">\n<string name="fov_axis" value="y"/>'
+                             '</sensor>', 3, "'fov'"),
+    "sphere beyond float range": ('<shape type="sphere"><float name="radius" value="1e308"/>\n'
+                                  '<transform name="to_world"><scale value="10"/></transform>'
+                                  '</shape>', 3, "floating-point range"),
+    "scaled camera": ('<sensor type="perspective">\n<transform name="to_world">'
+                      '<scale value="2"/></transform></sensor>', 3, "not scale"),
+    "nested scene": ('<scene version="3.0.0"/>', 2, "<scene>"),
+}
+
+
+@pytest.mark.parametrize("body, line, fragments",
+                         [(b, line, f) for b, line, *f in MITSUBA_CASES.values()],
+                         ids=list(MITSUBA_CASES))
+def test_mitsuba_errors(tmp_path, body, line, fragments):
+    expect_error(tmp_path, M.format(body), line, *fragments)
+
+
+NORI_CASES = {
+    "missing camera": ('<integrator type="path_mis"/>', 1, "needs a <camera>"),
+    "missing integrator": ('<camera type="perspective"/>', 1, "needs an <integrator>",
+                           "path_mis"),
+    "unknown integrator": ('<integrator type="photon"/>', 2, "'photon'", "path_mis", "whitted"),
+    "medium with sigma_t and sigma_a": (NORI_OK + '\n<medium type="homogeneous">'
+                                        '<float name="sigma_s" value="1"/>'
+                                        '<float name="sigma_t" value="1"/>'
+                                        '<float name="sigma_a" value="1"/></medium>', 3,
+                                        "exactly one"),
+    "sigma_s above sigma_t": (NORI_OK + '<medium type="homogeneous">'
+                              '<float name="sigma_s" value="2"/>\n'
+                              '<float name="sigma_t" value="1"/></medium>', 3, "exceeds"),
+    "medium g out of range": (NORI_OK + '<medium type="homogeneous">'
+                              '<float name="sigma_s" value="1"/><float name="sigma_a" value="1"/>'
+                              '\n<float name="g" value="-1.5"/></medium>', 3, "-1 < g < 1"),
+    "point without power": (NORI_OK + '\n<emitter type="point"/>', 3,
+                            "missing required parameter 'power'"),
+    "area without radiance": (NORI_OK + '<mesh type="obj"><string name="filename" '
+                              'value="t.obj"/>\n<emitter type="area"/></mesh>', 3,
+                              "'radiance'"),
+    "rgb in nori": (NORI_OK + '<mesh type="obj"><bsdf type="diffuse">\n<rgb name="albedo" '
+                    'value="1"/></bsdf></mesh>', 3, "<rgb>", "<color>"),
+    "mesh type ply": (NORI_OK + '\n<mesh type="ply"/>', 3, "'ply'", "obj"),
+    "two media": (NORI_OK + '<medium type="homogeneous"><float name="sigma_s" value="1"/>'
+                  '<float name="sigma_a" value="1"/></medium>\n'
+                  '<medium type="homogeneous"><float name="sigma_s" value="1"/>'
+                  '<float name="sigma_a" value="1"/></medium>', 3, "at most one medium"),
+    "nori sampler": (NORI_OK + '\n<sampler type="stratified"/>', 3, "'stratified'"),
+    "scaled nori camera": ('<integrator type="path_mis"/><camera type="perspective">\n'
+                           '<transform name="toWorld"><scale value="1, 1, 3"/></transform>'
+                           '</camera>', 3, "not scale"),
+    "camera width zero": ('<integrator type="path_mis"/><camera type="perspective">\n'
+                          '<integer name="width" value="0"/></camera>', 3, "width"),
+}
+
+
+@pytest.mark.parametrize("body, line, fragments",
+                         [(b, line, f) for b, line, *f in NORI_CASES.values()],
+                         ids=list(NORI_CASES))
+def test_nori_errors(tmp_path, body, line, fragments):
+    (tmp_path / "t.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    expect_error(tmp_path, N.format(body), line, *fragments)
+
+
+def test_nori_scene_attribute(tmp_path):
+    expect_error(tmp_path, '<scene id="x"/>', 1, "'id'")
+
+
+def test_ttest_count_mismatch(tmp_path):
+    scene = f'<scene>{NORI_OK}</scene>'
+    text = (f'<test type="ttest">\n<string name="references" value="1, 2"/>\n{scene}\n</test>')
+    expect_error(tmp_path, text, 2, "2 references for 1 scenes")
+
+
+def test_ttest_bad_reference(tmp_path):
+    text = f'<test type="ttest">\n<string name="references" value="1, x"/><scene>{NORI_OK}</scene></test>'
+    expect_error(tmp_path, text, 2, "'x'")
+
+
+# -- XML-level problems ------------------------------------------------------------------------
+
+def test_malformed_xml(tmp_path):
+    expect_error(tmp_path, '<scene version="3.0.0">\n<shape type="cube">\n</scene>\n', 3,
+                 "malformed XML", "mismatched tag")
+
+
+def test_empty_file(tmp_path):
+    expect_error(tmp_path, "", 1, "malformed XML")
+
+
+def test_doctype_is_rejected(tmp_path):
+    text = '<?xml version="1.0"?>\n<!DOCTYPE scene>\n<scene version="3.0.0"/>\n'
+    expect_error(tmp_path, text, 2, "DOCTYPE")
+
+
+def test_external_entity_is_rejected(tmp_path):
+    text = ('<?xml version="1.0"?>\n<!DOCTYPE scene [<!ENTITY x SYSTEM "file:///etc/passwd">]>\n'
+            '<scene version="3.0.0"><string name="a" value="&x;"/></scene>\n')
+    expect_error(tmp_path, text, 2, "DOCTYPE")
+
+
+def test_billion_laughs_is_rejected_quickly(tmp_path):
+    lines = ['<?xml version="1.0"?>', '<!DOCTYPE lolz [', ' <!ENTITY lol "lol">']
+    lines += [f' <!ENTITY lol{i} "{("&lol" + str(i - 1) + ";") * 10 if i > 1 else "&lol;" * 10}">'
+              for i in range(1, 10)]
+    lines += [']>', '<scene version="3.0.0"><default name="a" value="&lol9;"/></scene>']
+    start = time.perf_counter()
+    expect_error(tmp_path, "\n".join(lines), 2, "DOCTYPE")
+    assert time.perf_counter() - start < 1.0
+
+
+def test_undeclared_entity_reference(tmp_path):
+    expect_error(tmp_path, '<scene version="3.0.0">\n<foo a="&x;"/></scene>', 2, "undefined entity")
+
+
+def test_parameter_expansion_bomb_is_rejected(tmp_path):
+    defaults = ['<default name="a0" value="xxxxxxxxxx"/>']
+    defaults += [f'<default name="a{i}" value="{("$a" + str(i - 1)) * 10}"/>' for i in range(1, 9)]
+    text = M.format("\n".join(defaults))
+    start = time.perf_counter()
+    expect_error(tmp_path, text, None, "longer than")
+    assert time.perf_counter() - start < 1.0
+
+
+def test_deep_nesting(tmp_path):
+    body = '<bsdf type="twosided">' * 100 + '<bsdf type="diffuse"/>' + '</bsdf>' * 100
+    expect_error(tmp_path, M.format(body), 2, "nested more than")
+
+
+def test_wrong_root(tmp_path):
+    expect_error(tmp_path, '<html/>', 1, "root element", "<html>")
+
+
+def test_old_mitsuba_version(tmp_path):
+    expect_error(tmp_path, '<scene version="2.1.0"/>', 1, "'2.1.0'", "version 3")
+
+
+def test_missing_scene_file(tmp_path):
+    with pytest.raises(VolclError, match="absent.xml"):
+        load(tmp_path / "absent.xml")
+
+
+# -- problems in referenced files --------------------------------------------------------------
+
+def _mesh_scene(tmp_path, mesh_name: str, mesh_text: str, kind: str = "obj") -> str:
+    (tmp_path / mesh_name).write_text(mesh_text)
+    return M.format(f'<shape type="{kind}">\n<string name="filename" value="{mesh_name}"/>'
+                    '</shape>')
+
+
+@pytest.mark.parametrize("mesh_name, text, kind, fragment", [
+    ("empty.obj", "# nothing\n", "obj", "empty"),
+    ("nan.obj", "v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "obj", "non-finite"),
+    ("bad.ply", "not a ply file\n", "ply", "cannot parse PLY"),
+    ("index.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n", "obj", "cannot parse OBJ"),
+])
+def test_bad_mesh_files(tmp_path, mesh_name, text, kind, fragment):
+    message = expect_error(tmp_path, _mesh_scene(tmp_path, mesh_name, text, kind), 3, fragment)
+    assert mesh_name in message
+
+
+def test_bad_vol_file_names_scene_and_volume(tmp_path):
+    (tmp_path / "bad.vol").write_bytes(b"XYZ" + bytes(100))
+    body = ('<medium type="heterogeneous">\n<volume type="gridvolume" name="sigma_t">\n'
+            '<string name="filename" value="bad.vol"/></volume></medium>')
+    message = expect_error(tmp_path, M.format(body), 4, "bad.vol", "b'XYZ'")
+    assert "not a valid Mitsuba .vol file" in message
+
+
+def test_albedo_grid_above_one(tmp_path):
+    write_vol(tmp_path / "albedo.vol", np.full((2, 2, 2), 1.5))
+    body = ('<medium type="heterogeneous">\n<volume type="gridvolume" name="albedo">'
+            '<string name="filename" value="albedo.vol"/></volume></medium>')
+    expect_error(tmp_path, M.format(body), 3, "'albedo' values must be in [0, 1]", "albedo.vol")
+

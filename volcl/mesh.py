@@ -1,0 +1,180 @@
+"""Triangle meshes: OBJ/PLY files read through trimesh, and the primitive shapes scenes name.
+
+Everything here is in object space; volcl.scene places meshes in the world. A mesh is a
+`TriangleMesh` of float64 vertices (n, 3), int64 faces (m, 3) and optional per-vertex shading
+normals (n, 3), present only when the file itself stores them.
+"""
+from __future__ import annotations
+
+import logging
+import os
+import warnings
+from contextlib import contextmanager
+from typing import NamedTuple, Optional
+
+import numpy as np
+
+from .errors import VolclError
+
+
+class TriangleMesh(NamedTuple):
+    vertices: np.ndarray
+    faces: np.ndarray
+    normals: Optional[np.ndarray] = None
+
+
+_FORMATS = ("obj", "ply")
+
+
+def load_mesh(path: str, fmt: Optional[str] = None) -> TriangleMesh:
+    """Read a mesh file as `fmt` ('obj' or 'ply'; default: from the extension).
+
+    Every problem with the file is a VolclError naming it.
+    """
+    ext = fmt or os.path.splitext(path)[1].lower().lstrip(".")
+    if ext not in _FORMATS:
+        raise VolclError(f"unsupported mesh format '{ext}'; supported: obj, ply", file=path)
+    if not os.path.isfile(path):
+        # Also refuses devices such as /dev/zero, which would never finish reading.
+        raise VolclError("mesh file not found (or not a regular file)", file=path)
+    try:
+        with open(path, "rb") as fh, _quiet_trimesh():
+            parts = _read_parts(fh, ext)
+            mesh = _concatenate(parts)
+    except OSError as exc:
+        raise VolclError(f"cannot read mesh file: {exc.strerror or exc}", file=path) from None
+    except Exception as exc:  # trimesh's parsers raise many unrelated types on bad input
+        raise VolclError(f"cannot parse {ext.upper()} mesh: {type(exc).__name__}: {exc}",
+                         file=path) from None
+    return _validated(mesh, path)
+
+
+def _read_parts(fh, ext: str) -> list[dict]:
+    """The file's geometry as a list of trimesh keyword dicts (one per OBJ object/material group).
+
+    The loaders are called directly rather than through trimesh.load so that 'vertex_normals'
+    appears exactly when the file stores normals, instead of being computed (or dropped while
+    joining groups). Materials are skipped: volcl takes materials from the scene file, and the
+    Nori meshes name .mtl files that do not exist.
+    """
+    from trimesh.exchange.obj import load_obj
+    from trimesh.exchange.ply import load_ply
+
+    if ext == "obj":
+        # OBJ has no transforms, so the scene graph trimesh also returns is all identities. A corner
+        # with its own v/vt/vn triple becomes its own vertex, which keeps per-corner normals.
+        loaded = load_obj(fh, skip_materials=True)
+        return list(loaded.get("geometry", {}).values())
+    return [load_ply(fh, skip_materials=True)]
+
+
+@contextmanager
+def _quiet_trimesh():
+    logger = logging.getLogger("trimesh")
+    level = logger.level
+    logger.setLevel(logging.ERROR)
+    try:
+        # trimesh's texture-coordinate merging warns on NaN medians for meshes with one shared vt.
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            yield
+    finally:
+        logger.setLevel(level)
+
+
+def _concatenate(parts: list[dict]) -> TriangleMesh:
+    vertices, faces, normals = [], [], []
+    offset = 0
+    for part in parts:
+        v = np.asarray(part.get("vertices", np.zeros((0, 3))), dtype=np.float64).reshape(-1, 3)
+        f = _triangulate(part.get("faces"))
+        n = part.get("vertex_normals")
+        vertices.append(v)
+        faces.append(f + offset)
+        normals.append(None if n is None else np.asarray(n, dtype=np.float64).reshape(-1, 3))
+        offset += len(v)
+    if not vertices:
+        return TriangleMesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
+    # Shading normals only when every part has them; a partial set cannot be used consistently.
+    has_normals = all(n is not None and len(n) == len(v) for n, v in zip(normals, vertices))
+    return TriangleMesh(np.concatenate(vertices), np.concatenate(faces),
+                        np.concatenate(normals) if has_normals else None)
+
+
+def _triangulate(faces) -> np.ndarray:
+    """Triangles from polygons as fans around their first corner; the PLY loader keeps quads and
+    n-gons as they are in the file (a rectangular array, or a list when sizes are mixed)."""
+    if faces is None or len(faces) == 0:
+        return np.zeros((0, 3), dtype=np.int64)
+    try:
+        polygons = [np.asarray(faces, dtype=np.int64)]
+    except ValueError:       # ragged: polygons of several sizes, grouped by size
+        by_size: dict[int, list] = {}
+        for polygon in faces:
+            by_size.setdefault(len(polygon), []).append(polygon)
+        polygons = [np.asarray(group, dtype=np.int64) for group in by_size.values()]
+    triangles = []
+    for group in polygons:
+        group = group.reshape(len(group), -1)
+        corners = group.shape[1]
+        if corners < 3:
+            raise ValueError(f"a face has {corners} corners")
+        for i in range(1, corners - 1):
+            triangles.append(group[:, [0, i, i + 1]])
+    return np.concatenate(triangles)
+
+
+def _validated(mesh: TriangleMesh, path: str) -> TriangleMesh:
+    v, f, n = mesh
+    if len(v) == 0 or len(f) == 0:
+        raise VolclError("the mesh is empty (no triangles)", file=path)
+    if not np.isfinite(v).all():
+        raise VolclError("the mesh has non-finite vertex positions", file=path)
+    if f.min() < 0 or f.max() >= len(v):
+        raise VolclError("the mesh has faces that index missing vertices", file=path)
+    if n is not None:
+        length = np.linalg.norm(n, axis=1)
+        if not (np.isfinite(length).all() and (length > 0).all()):
+            raise VolclError("the mesh has zero-length or non-finite vertex normals; "
+                             "fix the file or set face_normals=true", file=path)
+        n = n / length[:, None]
+    return TriangleMesh(v, f, n)
+
+
+def rectangle() -> TriangleMesh:
+    """[-1, 1]^2 at z = 0; the winding makes the geometric normal +z."""
+    v = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], dtype=np.float64)
+    f = np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int64)
+    return TriangleMesh(v, f)
+
+
+def cube() -> TriangleMesh:
+    """[-1, 1]^3 as 12 triangles wound so that every geometric normal points outward; flat."""
+    v = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=np.float64)
+    # Vertex index = 4 * (x > 0) + 2 * (y > 0) + (z > 0); each quad is counter-clockwise seen
+    # from outside.
+    quads = [(0, 1, 3, 2),   # -x
+             (4, 6, 7, 5),   # +x
+             (0, 4, 5, 1),   # -y
+             (2, 3, 7, 6),   # +y
+             (0, 2, 6, 4),   # -z
+             (1, 5, 7, 3)]   # +z
+    f = np.array([tri for a, b, c, d in quads for tri in ((a, b, c), (a, c, d))], dtype=np.int64)
+    return TriangleMesh(v, f)
+
+
+DISK_SEGMENTS = 512
+
+
+def disk(segments: int = DISK_SEGMENTS) -> TriangleMesh:
+    """The unit disk at z = 0, normal +z, as a fan of `segments` triangles around the centre.
+
+    The polygon's area is (n / 2) sin(2 pi / n), short of pi by about pi (2 pi / n)^2 / 6; with the
+    512 segments used by default that is 7.9e-5, within the 1e-4 of pi volcl promises.
+    """
+    angle = 2.0 * np.pi * np.arange(segments) / segments
+    rim = np.column_stack([np.cos(angle), np.sin(angle), np.zeros(segments)])
+    v = np.vstack([[0.0, 0.0, 0.0], rim])
+    i = np.arange(segments)
+    f = np.column_stack([np.zeros(segments, dtype=np.int64), 1 + i, 1 + (i + 1) % segments])
+    return TriangleMesh(v, f.astype(np.int64))
