@@ -1,0 +1,98 @@
+"""The volcl command line: rendering to EXR and PNG, devices, Nori t-tests, batch behaviour, errors."""
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from volcl.image import read_image
+
+ROOT = Path(__file__).resolve().parent.parent
+SHARED = ROOT.parent / "shared"
+
+
+def volcl(*args, cwd=ROOT):
+    """Run the checkout's volcl command, from any working directory."""
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    return subprocess.run([sys.executable, "-m", "volcl", *map(str, args)], cwd=cwd, env=env,
+                          capture_output=True, text=True)
+
+
+def test_render_png_and_exr_with_metadata(tmp_path):
+    png, exr = tmp_path / "cbox.png", tmp_path / "cbox.exr"
+    r = volcl("render", "scenes/cbox.xml", "-o", png, "--spp", 2, "--width", 40, "--height", 30, "-q")
+    assert r.returncode == 0, r.stderr
+    assert "samples/s" in r.stdout and "features" in r.stdout
+    img, _ = read_image(png)
+    assert img.shape == (30, 40, 3)
+    r = volcl("render", "scenes/cbox.xml", "-o", exr, "--spp", 3, "--width", 40, "--height", 30, "--seed", 5, "-q")
+    assert r.returncode == 0, r.stderr
+    img, attrs = read_image(exr)
+    assert img.shape == (30, 40, 6)    # RGB and the variance layer
+    assert attrs["volcl:spp"] == 3 and attrs["volcl:seed"] == 5 and attrs["volcl:invalid_samples"] == 0
+    assert "spheres" in attrs["volcl:features"]
+    assert np.isfinite(img).all() and img[..., :3].mean() > 0
+    assert not list(tmp_path.glob(".*")), "temporary files left behind"
+
+
+def test_define_overrides_scene_default(tmp_path):
+    out = tmp_path / "d.exr"
+    r = volcl("render", "scenes/cbox.xml", "-o", out, "-D", "spp=2", "-D", "width=20", "-D", "height=10", "-q")
+    assert r.returncode == 0, r.stderr
+    img, attrs = read_image(out)
+    assert img.shape[:2] == (10, 20) and attrs["volcl:spp"] == 2
+
+
+def test_devices_lists_a_device_whose_kernels_build():
+    r = volcl("devices")
+    assert r.returncode == 0, r.stderr
+    lines = r.stdout.splitlines()
+    assert lines[0].split()[:3] == ["index", "type", "units"]
+    assert any(" build " in line for line in lines[1:])
+
+
+def test_unknown_device_is_a_clear_error(tmp_path):
+    r = volcl("render", "scenes/cbox.xml", "-o", tmp_path / "x.png", "--device", "no-such-device", "--spp", 1)
+    assert r.returncode == 2
+    assert "no OpenCL device matches --device 'no-such-device'" in r.stderr and "available" in r.stderr
+
+
+def test_bad_scene_names_file_and_line(tmp_path):
+    bad = tmp_path / "bad.xml"
+    bad.write_text('<scene version="3.0.0">\n  <shape type="teapot"/>\n</scene>\n')
+    r = volcl("render", bad, "-o", tmp_path / "x.png")
+    assert r.returncode == 2
+    assert f"{bad}:2" in r.stderr and "teapot" in r.stderr
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_batch_renders_the_good_scenes_and_reports_the_broken_one(tmp_path):
+    bad = tmp_path / "broken.xml"
+    bad.write_text("<scene version='3.0.0'><shape type='obj'><string name='filename' value='none.obj'/></shape></scene>")
+    good = ROOT / "scenes" / "cbox.xml"
+    r = volcl("render", good, bad, "--spp", 1, "--width", 16, "--height", 16, "-q", cwd=tmp_path)
+    assert r.returncode == 1
+    assert (tmp_path / "cbox.exr").is_file()
+    assert "1 of 2 scenes rendered" in r.stdout and "FAILED" in r.stdout and "broken.xml" in r.stdout
+
+
+@pytest.mark.skipif(not (SHARED / "nori" / "furnace").is_dir(), reason="../shared/nori is not beside the checkout")
+def test_nori_furnace_t_test_file_passes():
+    """Nori's own test file: furnaces with L = 2 and 5 for three integrators."""
+    r = volcl("test", SHARED / "nori" / "furnace" / "test-furnace.xml")
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "6 passed, 0 failed" in r.stdout
+
+
+def test_nori_cornell_box_renders(tmp_path):
+    """The Nori dialect's Cornell box (mirror and glass spheres) renders without invalid samples."""
+    scene = SHARED / "nori" / "cbox" / "cbox_path_mis.xml"
+    if not scene.is_file():
+        pytest.skip("../shared/nori is not beside the checkout")
+    out = tmp_path / "cbox.exr"
+    r = volcl("render", scene, "-o", out, "--spp", 2, "--width", 80, "--height", 60, "-q")
+    assert r.returncode == 0, r.stderr
+    img, attrs = read_image(out)
+    assert attrs["volcl:invalid_samples"] == 0 and img[..., :3].mean() > 0.05
