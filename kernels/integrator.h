@@ -55,6 +55,15 @@ inline float3 shadow_transmittance(const SceneData *sc, float3 o, float3 w, floa
 #endif
 }
 
+/* Weight of a light found by BSDF or phase sampling (pdf_scatter) that NEE could also have sampled
+ * (pdf_light): the power heuristic with MIS on; with NEE alone such hits are NEE's to count (0);
+ * without NEE they are the only estimate (1). */
+inline float hit_weight(__global const RenderParams *rp, float pdf_scatter, float pdf_light) {
+    if (!rp->nee) return 1.0f;
+    if (!rp->mis) return 0.0f;
+    return power_heuristic(pdf_scatter, pdf_light);
+}
+
 /* Light arriving at a vertex by next-event estimation, already weighted by MIS against `scatter_pdf`.
  * `f` is the vertex's scattering value towards ls.wi (BSDF value * cos, or phase value). */
 inline float3 nee_contribution(const SceneData *sc, const LightSample *ls, float3 f, float scatter_pdf,
@@ -63,7 +72,7 @@ inline float3 nee_contribution(const SceneData *sc, const LightSample *ls, float
     float t_max = ls->dist < INFINITY ? ls->dist * 0.9999f : INFINITY;
     float3 tr = shadow_transmittance(sc, origin, ls->wi, t_max, medium);
     if (max_component(tr) <= 0.0f) return (float3)(0.0f);
-    float w = ls->delta ? 1.0f : power_heuristic(ls->pdf, scatter_pdf);
+    float w = (ls->delta || !sc->params->mis) ? 1.0f : power_heuristic(ls->pdf, scatter_pdf);
     return f * ls->value * tr * (w / ls->pdf);
 }
 
@@ -76,7 +85,7 @@ inline float3 integrator_radiance(const SceneData *sc, Rng *rng, float3 o, float
     float prev_pdf = 0.0f;      /* solid-angle pdf of the direction sampled at the last vertex */
     float3 prev_p = o;
     float eta_scale = 1.0f;
-    bool has_lights = rp->light_count > 0;
+    bool do_nee = rp->light_count > 0 && rp->nee;
 
     for (int step = 0; step < VOLCL_MAX_STEPS; ++step) {
         Hit h;
@@ -97,7 +106,7 @@ inline float3 integrator_radiance(const SceneData *sc, Rng *rng, float3 o, float
                 if (rp->max_depth >= 0 && depth + 1 >= rp->max_depth) break;
                 if (max_component(beta) <= 0.0f) break;
                 /* next-event estimation, MIS against phase sampling */
-                if (has_lights) {
+                if (do_nee) {
                     LightSample ls;
                     float u_pick = rng_next_float(rng);
                     float2 ul = rng_next_float2(rng);
@@ -122,7 +131,7 @@ inline float3 integrator_radiance(const SceneData *sc, Rng *rng, float3 o, float
         if (!hit) {
 #if VOLCL_HAS_ENV_LIGHTS
             if (rp->env_light >= 0 && !(rp->hide_emitters && depth == 0)) {
-                float w = specular ? 1.0f : power_heuristic(prev_pdf, light_env_pdf(sc));
+                float w = specular ? 1.0f : hit_weight(rp, prev_pdf, light_env_pdf(sc));
                 L += beta * vload_f3(sc->lights[rp->env_light].value) * w;
             }
 #endif
@@ -137,7 +146,7 @@ inline float3 integrator_radiance(const SceneData *sc, Rng *rng, float3 o, float
                 float3 le = light_area_emission(&sc->lights[shape->light], s.ns, wo_world);
                 if (max_component(le) > 0.0f) {
                     float w = specular ? 1.0f
-                                       : power_heuristic(prev_pdf, light_area_pdf(sc, shape->light, prev_p, s.p, s.ng));
+                                       : hit_weight(rp, prev_pdf, light_area_pdf(sc, shape->light, prev_p, s.p, s.ng));
                     L += beta * le * w;
                 }
             }
@@ -160,7 +169,7 @@ inline float3 integrator_radiance(const SceneData *sc, Rng *rng, float3 o, float
             float3 wo = frame_to_local(wo_world, ss, ts, s.ns);
             bool delta = bsdf_is_delta(bsdf);
 
-            if (has_lights && !delta) {
+            if (do_nee && !delta) {
                 LightSample ls;
                 float u_pick = rng_next_float(rng);
                 float2 ul = rng_next_float2(rng);

@@ -127,7 +127,9 @@ typedef struct {
     uint seed;
     float scene_radius;     /* bounding sphere, for directional lights */
     float scene_center[3];
-    int pad0[4];
+    int nee;                /* next-event estimation on (1) or off (0: lights are found by hitting them) */
+    int mis;                /* with nee: combine with BSDF / phase sampling by MIS (1) or not (0) */
+    int pad0[2];
 } RenderParams;
 
 #endif

@@ -96,3 +96,9 @@ def test_nori_cornell_box_renders(tmp_path):
     assert r.returncode == 0, r.stderr
     img, attrs = read_image(out)
     assert attrs["volcl:invalid_samples"] == 0 and img[..., :3].mean() > 0.05
+
+
+def test_define_that_the_scene_never_reads_is_an_error(tmp_path):
+    r = volcl("render", "scenes/cbox.xml", "-o", tmp_path / "x.png", "-D", "sppp=4")
+    assert r.returncode == 2
+    assert "-D sppp" in r.stderr and "spp" in r.stderr

@@ -126,8 +126,8 @@ def cmd_info(args):
     print(f"camera     {cam.width}x{cam.height}, fov {cam.fov:g} ({cam.fov_axis}), filter {cam.rfilter.kind}")
     print(f"integrator {scene.integrator.kind}, max_depth {scene.integrator.max_depth}, spp {scene.spp}")
     print(f"shapes     {len(scene.shapes)} ({packed.triangle_count} triangles, {packed.sphere_count} spheres)")
-    print(f"emitters   {sum(s.emitter_radiance is not None for s in scene.shapes)} area, "
-          + ", ".join(e.kind for e in scene.emitters))
+    kinds = ["area"] * sum(s.emitter_radiance is not None for s in scene.shapes) + [e.kind for e in scene.emitters]
+    print(f"emitters   {len(kinds)}" + (f" ({', '.join(kinds)})" if kinds else ""))
     print(f"media      {len(scene.media)}")
     print(f"features   {describe(feats)}")
     print("flags      " + " ".join(f"VOLCL_HAS_{n}={int(feats[n])}" for n in FLAGS))

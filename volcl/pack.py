@@ -253,6 +253,7 @@ def pack(scene: Scene, features: dict | None = None, max_leaf: int = 4) -> Packe
     params["filter_size"] = FILTER_TABLE_SIZE
     params["filter_radius"] = cam.rfilter.radius
     params["seed"] = scene.seed & 0xFFFFFFFF
+    params["nee"], params["mis"] = 1, 1
     center = 0.5 * (bounds_lo + bounds_hi)
     params["scene_center"] = center
     params["scene_radius"] = 0.5 * float(np.linalg.norm(bounds_hi - bounds_lo))

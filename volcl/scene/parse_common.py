@@ -90,11 +90,12 @@ def substitute_parameters(root: Element, defines: Mapping[str, str], default_par
     """
     params = dict(defines)
     fixed = set(defines)
+    used = set()
 
     def walk(el: Element) -> None:
         kept = []
         for child in el.children:
-            _substitute_attrs(child, params)
+            _substitute_attrs(child, params, used)
             if child.tag == "default":
                 if el.tag not in default_parents:
                     raise child.error("<default> is only allowed directly inside "
@@ -103,19 +104,27 @@ def substitute_parameters(root: Element, defines: Mapping[str, str], default_par
                 check_leaf(child)
                 if child.attrs["name"] not in fixed:
                     params[child.attrs["name"]] = child.attrs["value"]
+                used.add(child.attrs["name"])
                 continue
             kept.append(child)
             walk(child)
         el.children = kept
 
-    _substitute_attrs(root, params)
+    _substitute_attrs(root, params, used)
     walk(root)
+    unused = sorted(fixed - used)
+    if unused:
+        # as in Mitsuba: a -D the scene never reads is a typo, not something to skip silently
+        declared = sorted(used - fixed) or ["none"]
+        raise VolclError(f"-D {unused[0]}=...: the scene has no <default name=\"{unused[0]}\"> and uses no "
+                         f"${unused[0]}; its parameters: {', '.join(declared)}", file=root.file)
 
 
-def _substitute_attrs(el: Element, params: Mapping[str, str]) -> None:
+def _substitute_attrs(el: Element, params: Mapping[str, str], used: set) -> None:
     for key, value in el.attrs.items():
         if "$" in value:
             el.attrs[key] = _substitute(el, key, value, params)
+            used.update(m.group(1) for m in _PARAM_REF.finditer(value))
 
 
 # Defaults may refer to earlier defaults, so without a cap a few lines could build a value of
