@@ -46,6 +46,7 @@ inline float3 bsdf_color(__global const Bsdf *b) { return vload_f3(b->color); }
 inline bool bsdf_is_delta(__global const Bsdf *b) { return b->type != BSDF_DIFFUSE; }
 
 /* value = f * |cos wi|, with its pdf. Delta lobes evaluate to zero: they are reached only by sampling. */
+__attribute__((always_inline))
 inline float3 bsdf_eval(__global const Bsdf *b, float3 wo, float3 wi, float *pdf) {
     *pdf = 0.0f;
 #if VOLCL_HAS_DIFFUSE
@@ -59,6 +60,7 @@ inline float3 bsdf_eval(__global const Bsdf *b, float3 wo, float3 wi, float *pdf
     return (float3)(0.0f);
 }
 
+__attribute__((always_inline))
 inline bool bsdf_sample(__global const Bsdf *b, float3 wo, float u1, float2 u2, BsdfSample *s) {
     s->eta = 1.0f;
 #if VOLCL_HAS_DIFFUSE

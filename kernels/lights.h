@@ -30,6 +30,7 @@ inline float3 light_area_emission(__global const Light *l, float3 ns, float3 w) 
     return dot(ns, w) > 0.0f ? vload_f3(l->value) : (float3)(0.0f);
 }
 
+__attribute__((always_inline))
 inline bool light_sample(const SceneData *sc, float3 ref, float u_pick, float2 u, LightSample *ls) {
     int count = sc->params->light_count;
     int li = min((int)(u_pick * (float)count), count - 1);

@@ -12,6 +12,7 @@ typedef struct {
     int shape;
 } SurfacePoint;
 
+__attribute__((always_inline))
 inline SurfacePoint surface_point(const SceneData *sc, const Hit *h, float3 o, float3 d) {
     SurfacePoint s;
 #if VOLCL_HAS_SPHERES

@@ -26,9 +26,10 @@ from scipy.stats import binomtest, chi2, norm
 # (tests/test_rng.py, test_sampling.py, test_phase.py, test_bsdf.py) on a given seed.
 ALPHA = 0.01
 # Upper bound on the number of hypothesis tests those files make (each chi-square test, each column
-# of a z-test of means, each binomial test counts once). Every check below counts itself and fails
-# when a run makes more tests than this, so the correction cannot silently fall behind the suite.
-SUITE_TESTS = 400
+# of a z-test of means, each binomial test counts once): 193 when this was written. Every check
+# below counts itself and fails when a run makes more tests than this, so the correction cannot
+# silently fall behind the suite. With 200: per-test significance 5.0e-5, |z| limit 4.06.
+SUITE_TESTS = 200
 _tests_made = 0
 
 
@@ -84,10 +85,30 @@ def _gauss_2d(f, x0, x1, y0, y1):
     return hx * hy * np.einsum("mij,i,j->m", v, _GW, _GW)
 
 
-def integrate_cells_1d(f, edges, cell_tol, max_depth: int = 30):
+# relative accuracy below which a sub-cell counts as converged whatever its budget: float64 rounding
+# of the Gauss sums would otherwise keep a tall narrow peak refining forever
+REL_FLOOR = 1e-12
+MAX_ACTIVE = 100_000    # sub-cells refined at once; more means the budget is unreachable (memory, time)
+
+
+class QuadratureError(AssertionError):
+    pass
+
+
+def _give_up(active: int, depth: int, err: float):
+    raise QuadratureError(f"adaptive quadrature did not converge: {active} sub-cells still above their budget "
+                          f"at depth {depth} (largest error {err:.3g}); widen the budget or align the grid with "
+                          "the pdf's discontinuities")
+
+
+def integrate_cells_1d(f, edges, cell_tol, max_depth: int = 60, rule: bool = False, min_depth: int = 6):
     """Integral of f over each interval [edges[i], edges[i+1]]. cell_tol(estimates) gives each
     cell's absolute error budget; a sub-interval holding a fraction w of its cell gets
-    budget * sqrt(w), which lets refinement converge around discontinuities and kinks."""
+    budget * sqrt(w), which lets refinement converge around discontinuities and kinks. Raises
+    QuadratureError rather than return an integral that missed its budget. Every cell is halved
+    min_depth times before any estimate is trusted (cheap in 1D), so that features a fraction of a
+    cell wide (jumps of a tabulated density) cannot hide between the Gauss nodes. rule=True also
+    returns the rule it converged to, (nodes, weights), as integrate_cells_2d does."""
     edges = np.asarray(edges, np.float64)
     ncell = len(edges) - 1
     a, b, owner = edges[:-1].copy(), edges[1:].copy(), np.arange(ncell)
@@ -95,7 +116,7 @@ def integrate_cells_1d(f, edges, cell_tol, max_depth: int = 30):
     budget = np.asarray(cell_tol(coarse), np.float64) * np.ones(ncell)
     width0 = b - a
     out = np.zeros(ncell)
-    worst = 0.0
+    final = []
     for depth in range(max_depth):
         m = 0.5 * (a + b)
         ca, cb = np.concatenate([a, m]), np.concatenate([m, b])
@@ -103,21 +124,46 @@ def integrate_cells_1d(f, edges, cell_tol, max_depth: int = 30):
         fine = child[:len(a)] + child[len(a):]
         err = np.abs(fine - coarse)
         tol = budget[owner] * np.sqrt((b - a) / width0[owner])
-        done = err <= tol
-        if depth == max_depth - 1:
-            worst = float(err[~done].max(initial=0.0))
-            done[:] = True
+        done = (err <= tol + REL_FLOOR * np.abs(fine)) & (depth >= min_depth)
+        if not done.all() and (depth == max_depth - 1 or 2 * np.count_nonzero(~done) > MAX_ACTIVE):
+            _give_up(2 * np.count_nonzero(~done), depth, float(err[~done].max()))
         np.add.at(out, owner[done], fine[done])
+        if rule:
+            d2 = np.concatenate([done, done])
+            final.append((ca[d2], cb[d2]))
         keep = np.concatenate([~done, ~done])
         a, b, owner, coarse = ca[keep], cb[keep], np.concatenate([owner, owner])[keep], child[keep]
         if len(a) == 0:
             break
-    return out, worst
+    if rule:
+        a, b = (np.concatenate(r) for r in zip(*final))
+        half = 0.5 * (b - a)
+        x = (0.5 * (a + b))[:, None] + half[:, None] * _GX[None]
+        return out, (x.ravel(), (half[:, None] * _GW[None]).ravel())
+    return out
 
 
-def integrate_cells_2d(f, x_edges, y_edges, cell_tol, max_depth: int = 20):
+def _gauss_nodes_2d(x0, x1, y0, y1):
+    """Nodes and weights of the tensor Gauss rule on each rectangle, flattened."""
+    hx, hy = 0.5 * (x1 - x0), 0.5 * (y1 - y0)
+    x = (0.5 * (x0 + x1))[:, None, None] + hx[:, None, None] * _GX[None, :, None]
+    y = (0.5 * (y0 + y1))[:, None, None] + hy[:, None, None] * _GX[None, None, :]
+    w = (hx * hy)[:, None, None] * (_GW[:, None] * _GW[None, :])[None]
+    x, y, w = np.broadcast_arrays(x, y, w)
+    return x.ravel(), y.ravel(), w.ravel()
+
+
+def integrate_cells_2d(f, x_edges, y_edges, cell_tol, max_depth: int = 60, rule: bool = False):
     """Integral of f(x, y) over each cell of the grid x_edges x y_edges, shape (nx, ny); adaptive
-    like integrate_cells_1d (a sub-cell holding a fraction w of its cell gets budget * sqrt(w))."""
+    like integrate_cells_1d (a sub-cell holding a fraction w of its cell gets budget * sqrt(w)).
+    A sub-cell is halved along x and along y for the error estimate, and split along the axis where
+    halving changed the estimate more, so a lobe or edge varying along one axis costs refinement
+    along that axis only.
+    Note the usual limit of adaptive quadrature: a feature narrower than a cell that no Gauss node
+    of the cell touches is missed (restrict the grid to the pdf's support instead).
+    rule=True also returns the quadrature rule it converged to, (x, y, weights), so that another
+    function (a float32 device routine, whose rounding noise would stall refinement) can be
+    integrated on the partition chosen for an accurate float64 one."""
     xe, ye = np.asarray(x_edges, np.float64), np.asarray(y_edges, np.float64)
     nx, ny = len(xe) - 1, len(ye) - 1
     ix, iy = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
@@ -127,29 +173,52 @@ def integrate_cells_2d(f, x_edges, y_edges, cell_tol, max_depth: int = 20):
     coarse = _gauss_2d(f, x0, x1, y0, y1)
     budget = np.asarray(cell_tol(coarse), np.float64) * np.ones(nx * ny)
     out = np.zeros(nx * ny)
-    worst = 0.0
+    final = []
     for depth in range(max_depth):
-        xm, ym = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
-        cx0 = np.concatenate([x0, xm, x0, xm])
-        cx1 = np.concatenate([xm, x1, xm, x1])
-        cy0 = np.concatenate([y0, y0, ym, ym])
-        cy1 = np.concatenate([ym, ym, y1, y1])
-        child = _gauss_2d(f, cx0, cx1, cy0, cy1)
         m = len(x0)
-        fine = child.reshape(4, m).sum(0)
-        err = np.abs(fine - coarse)
+        xm, ym = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+        # children: x-halves (left, right), then y-halves (bottom, top)
+        cx0 = np.concatenate([x0, xm, x0, x0])
+        cx1 = np.concatenate([xm, x1, x1, x1])
+        cy0 = np.concatenate([y0, y0, y0, ym])
+        cy1 = np.concatenate([y1, y1, ym, y1])
+        child = _gauss_2d(f, cx0, cx1, cy0, cy1).reshape(4, m)
+        fx, fy = child[0] + child[1], child[2] + child[3]
+        ex, ey = np.abs(fx - coarse), np.abs(fy - coarse)
+        along_x = ex >= ey
+        fine = np.where(along_x, fx, fy)
+        err = np.maximum(ex, ey)
         tol = budget[owner] * np.sqrt((x1 - x0) * (y1 - y0) / area0[owner])
-        done = err <= tol
-        if depth == max_depth - 1:
-            worst = float(err[~done].max(initial=0.0))
-            done[:] = True
+        done = err <= tol + REL_FLOOR * np.abs(fine)
+        if not done.all() and (depth == max_depth - 1 or 2 * np.count_nonzero(~done) > MAX_ACTIVE):
+            _give_up(2 * np.count_nonzero(~done), depth, float(err[~done].max()))
         np.add.at(out, owner[done], fine[done])
-        keep = np.tile(~done, 4)
-        x0, x1, y0, y1 = cx0[keep], cx1[keep], cy0[keep], cy1[keep]
-        owner, coarse = np.tile(owner, 4)[keep], child[keep]
-        if m == 0 or len(x0) == 0:
+        # the two children along the chosen axis, for every sub-cell
+        pick = np.where(along_x, 0, 2)
+        idx = np.concatenate([pick * m + np.arange(m), (pick + 1) * m + np.arange(m)])
+        sel_done, sel_keep = np.tile(done, 2), np.tile(~done, 2)
+        if rule:
+            k = idx[sel_done]
+            final.append((cx0[k], cx1[k], cy0[k], cy1[k]))
+        k = idx[sel_keep]
+        x0, x1, y0, y1 = cx0[k], cx1[k], cy0[k], cy1[k]
+        owner, coarse = np.tile(owner, 2)[sel_keep], child.ravel()[k]
+        if len(x0) == 0:
             break
-    return out.reshape(nx, ny), worst
+    if rule:
+        return out.reshape(nx, ny), _gauss_nodes_2d(*(np.concatenate(r) for r in zip(*final)))
+    return out.reshape(nx, ny)
+
+
+def _check_total(probabilities, n: int, what: str):
+    """The pdf integrates to one over the histogram's domain: the expected counts add up to n within
+    QUAD_FRACTION of the Poisson noise of the whole count. Catches a pdf that is not normalized, a
+    domain that misses part of the support, and a lobe that the quadrature stepped over."""
+    total = float(np.sum(probabilities))
+    if abs(total - 1.0) * n > QUAD_FRACTION * math.sqrt(n):
+        raise QuadratureError(f"{what}: the pdf integrates to {total:.9g} over the histogram's domain, not 1 "
+                              f"(tolerance {QUAD_FRACTION / math.sqrt(n):.2g}): not normalized, a domain smaller "
+                              "than its support, or a lobe narrower than the grid that the quadrature missed")
 
 
 def _poisson_budget(n: int):
@@ -234,6 +303,13 @@ def assert_chi_square(observed, expected, what: str, labels=None) -> ChiSquareRe
     return res
 
 
+def _finish(observed, expected, what, labels, check: bool) -> ChiSquareResult:
+    """check=False returns the result without asserting or counting (tests of the harness itself)."""
+    if check:
+        return assert_chi_square(observed, expected, what, labels)
+    return chi_square(observed, expected, labels)
+
+
 # ----------------------------------------------------------------------------------------------
 # domains
 
@@ -245,7 +321,7 @@ def _check_finite(samples, what):
 
 
 def chi2_1d(samples, pdf, lo: float, hi: float, bins: int = 51, extra_observed=(), extra_probability=(),
-            extra_labels=(), what: str = "1D samples") -> ChiSquareResult:
+            extra_labels=(), what: str = "1D samples", check: bool = True) -> ChiSquareResult:
     """Samples in [lo, hi) against pdf (float64 callable) on `bins` equal cells. A sample outside
     [lo, hi) fails the test. extra_*: further cells (e.g. a discrete 'no event' outcome) with their
     observed counts and exact probabilities, part of the same test."""
@@ -259,14 +335,18 @@ def chi2_1d(samples, pdf, lo: float, hi: float, bins: int = 51, extra_observed=(
     edges = np.linspace(lo, hi, bins + 1)
     idx = np.minimum(((x - lo) / (hi - lo) * bins).astype(np.int64), bins - 1)
     counts = np.bincount(idx, minlength=bins).astype(np.float64)
-    probs, _ = integrate_cells_1d(pdf, edges, _poisson_budget(n))
-    labels = [f"[{edges[i]:.4g}, {edges[i + 1]:.4g})" for i in range(bins)] + list(extra_labels)
+    probs = integrate_cells_1d(pdf, edges, _poisson_budget(n))
+    extra_labels = list(extra_labels) + [f"extra cell {k}" for k in range(len(extra_labels), len(extra_observed))]
+    labels = [f"[{edges[i]:.4g}, {edges[i + 1]:.4g})" for i in range(bins)] + extra_labels
+    allp = np.concatenate([probs, np.asarray(extra_probability, np.float64)])
+    _check_total(allp, n, what)
     obs = np.concatenate([counts, np.asarray(extra_observed, np.float64)])
-    exp = n * np.concatenate([probs, np.asarray(extra_probability, np.float64)])
-    return assert_chi_square(obs, exp, what, labels)
+    exp = n * allp
+    return _finish(obs, exp, what, labels, check)
 
 
-def chi2_2d(samples, pdf, x_range, y_range, res=(31, 31), what: str = "2D samples") -> ChiSquareResult:
+def chi2_2d(samples, pdf, x_range, y_range, res=(31, 31), what: str = "2D samples",
+            check: bool = True) -> ChiSquareResult:
     """Points (n, 2) in the rectangle x_range x y_range against pdf(x, y) (float64 callable)."""
     assert res[0] % 2 == 1 and res[1] % 2 == 1, "use an odd resolution"
     s = np.asarray(samples, np.float64)
@@ -279,10 +359,11 @@ def chi2_2d(samples, pdf, x_range, y_range, res=(31, 31), what: str = "2D sample
     j = np.minimum(((s[:, 1] - y0) / (y1 - y0) * res[1]).astype(np.int64), res[1] - 1)
     counts = np.bincount(i * res[1] + j, minlength=res[0] * res[1]).reshape(res).astype(np.float64)
     xe, ye = np.linspace(x0, x1, res[0] + 1), np.linspace(y0, y1, res[1] + 1)
-    probs, _ = integrate_cells_2d(pdf, xe, ye, _poisson_budget(n))
+    probs = integrate_cells_2d(pdf, xe, ye, _poisson_budget(n))
+    _check_total(probs, n, what)
     labels = [f"x [{xe[a]:.3g}, {xe[a + 1]:.3g}) y [{ye[b]:.3g}, {ye[b + 1]:.3g})"
               for a in range(res[0]) for b in range(res[1])]
-    return assert_chi_square(counts, n * probs, what, labels)
+    return _finish(counts, n * probs, what, labels, check)
 
 
 def _sphere_pdf_in_cos_phi(pdf):
@@ -293,7 +374,8 @@ def _sphere_pdf_in_cos_phi(pdf):
     return f
 
 
-def chi2_directions(dirs, pdf, res=(51, 101), cos_range=(-1.0, 1.0), what: str = "directions") -> ChiSquareResult:
+def chi2_directions(dirs, pdf, res=(51, 101), cos_range=(-1.0, 1.0), what: str = "directions",
+                    check: bool = True) -> ChiSquareResult:
     """Unit vectors (n, 3) against a solid-angle pdf(d) (float64 callable on (..., 3) arrays), on
     equal-area (cos theta, phi) cells over the sphere, or over the zone cos_range of it (for a pdf
     that vanishes outside: a sample outside the zone fails the test)."""
@@ -314,37 +396,54 @@ def chi2_directions(dirs, pdf, res=(51, 101), cos_range=(-1.0, 1.0), what: str =
     j = np.minimum((phi / (2 * np.pi) * res[1]).astype(np.int64), res[1] - 1)
     counts = np.bincount(i * res[1] + j, minlength=res[0] * res[1]).reshape(res).astype(np.float64)
     ce, pe = np.linspace(c0, c1, res[0] + 1), np.linspace(0.0, 2 * np.pi, res[1] + 1)
-    probs, _ = integrate_cells_2d(_sphere_pdf_in_cos_phi(pdf), ce, pe, _poisson_budget(n))
+    probs = integrate_cells_2d(_sphere_pdf_in_cos_phi(pdf), ce, pe, _poisson_budget(n))
+    _check_total(probs, n, what)
     labels = [f"cos [{ce[a]:.3f}, {ce[a + 1]:.3f}) phi [{pe[b]:.3f}, {pe[b + 1]:.3f})"
               for a in range(res[0]) for b in range(res[1])]
-    return assert_chi_square(counts, n * probs, what, labels)
+    return _finish(counts, n * probs, what, labels, check)
 
 
-def chi2_discrete(indices, probabilities, what: str = "discrete samples") -> ChiSquareResult:
+def chi2_discrete(indices, probabilities, what: str = "discrete samples", check: bool = True) -> ChiSquareResult:
     """Sampled indices against their probabilities; an index out of range fails the test."""
     k = np.asarray(indices)
     p = np.asarray(probabilities, np.float64)
     bad = (k < 0) | (k >= p.size)
     assert not bad.any(), f"{what}: {bad.sum()} indices outside [0, {p.size}), e.g. {k[bad][:5].tolist()}"
     counts = np.bincount(k, minlength=p.size).astype(np.float64)
-    return assert_chi_square(counts, k.size * p, what, [f"index {i}" for i in range(p.size)])
+    return _finish(counts, k.size * p, what, [f"index {i}" for i in range(p.size)], check)
 
 
 # ----------------------------------------------------------------------------------------------
 # "the pdf integrates to one"
 
 
+def line_rule(pdf, lo: float, hi: float, tol: float = 1e-9, cells: int = 65):
+    """A quadrature rule (nodes, weights) on [lo, hi] that integrates pdf (float64 callable) to
+    within tol: integrate a float32 device routine on it, or the same pdf."""
+    _, rule = integrate_cells_1d(pdf, np.linspace(lo, hi, cells + 1), lambda p: tol / cells, rule=True)
+    return rule
+
+
 def integral_1d(pdf, lo: float, hi: float, tol: float = 1e-9, cells: int = 65) -> float:
-    edges = np.linspace(lo, hi, cells + 1)
-    vals, _ = integrate_cells_1d(pdf, edges, lambda p: tol / cells)
-    return float(vals.sum())
+    x, w = line_rule(pdf, lo, hi, tol, cells)
+    return float(np.sum(w * pdf(x)))
 
 
-def integral_sphere(pdf, tol: float = 1e-9, res=(33, 65)) -> float:
-    """Integral over the sphere of a solid-angle density pdf(d) (float64 callable on (..., 3))."""
-    vals, _ = integrate_cells_2d(_sphere_pdf_in_cos_phi(pdf), np.linspace(-1, 1, res[0] + 1),
-                                 np.linspace(0, 2 * np.pi, res[1] + 1), lambda p: tol / (res[0] * res[1]))
-    return float(vals.sum())
+def sphere_rule(pdf, tol: float = 1e-9, res=(51, 101), cos_range=(-1.0, 1.0)):
+    """A quadrature rule (directions (k, 3), weights (k,)) over the sphere, or the zone cos_range
+    of it, that integrates the solid-angle density pdf (float64 callable on (..., 3)) to within tol."""
+    _, (c, phi, w) = integrate_cells_2d(_sphere_pdf_in_cos_phi(pdf), np.linspace(*cos_range, res[0] + 1),
+                                        np.linspace(0, 2 * np.pi, res[1] + 1), lambda p: tol / (res[0] * res[1]),
+                                        rule=True)
+    s = np.sqrt(np.maximum(0.0, 1.0 - c * c))
+    return np.stack([s * np.cos(phi), s * np.sin(phi), c], axis=-1), w
+
+
+def integral_sphere(pdf, tol: float = 1e-9, res=(51, 101), cos_range=(-1.0, 1.0)) -> float:
+    """Integral over the sphere (or the zone cos_range of it, for a pdf that vanishes outside) of a
+    solid-angle density pdf(d) (float64 callable on (..., 3))."""
+    d, w = sphere_rule(pdf, tol, res, cos_range)
+    return float(np.sum(w * pdf(d)))
 
 
 def assert_integrates_to_one(total: float, tol: float, what: str):
@@ -356,16 +455,20 @@ def assert_integrates_to_one(total: float, tol: float, what: str):
 # means and probabilities
 
 
-def assert_mean(values, expected, what: str, names=None):
-    """The sample mean of each column of `values` equals `expected` within z_limit() standard errors
-    (estimated from the samples). A column whose samples are all equal has no standard error: its
-    mean must then equal the expectation to float32 rounding. Counts as one test per column."""
+def assert_mean(values, expected, what: str, names=None, sd=None):
+    """The sample mean of each column of `values` equals `expected` within z_limit() standard errors.
+    The standard error is estimated from the samples, or comes from `sd`, the standard deviation the
+    null hypothesis implies, where it is known: prefer that for skewed distributions, whose rare
+    large values make the sample estimate unreliable. A column whose samples are all equal has no
+    standard error: its mean must then equal the expectation to float32 rounding. Counts as one
+    test per column."""
     v = np.asarray(values, np.float64)
     v = v.reshape(len(v), -1)
     _check_finite(v, what)
     exp = np.broadcast_to(np.asarray(expected, np.float64), (v.shape[1],))
     mean = v.mean(0)
-    se = v.std(0, ddof=1) / math.sqrt(len(v))
+    spread = v.std(0, ddof=1) if sd is None else np.broadcast_to(np.asarray(sd, np.float64), (v.shape[1],))
+    se = spread / math.sqrt(len(v))
     _count(v.shape[1])
     limit = z_limit()
     fails = []
