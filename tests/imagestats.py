@@ -47,3 +47,27 @@ def assert_mean_matches(result, expected, blocks: int = 4, mask=None, what="imag
                                 f"{exp[sy, sx][sel][:, c].mean():.6g} (z = {z:.2f}, limit {limit:.2f})")
     assert not failures, f"{what}: " + "; ".join(failures[:6])
     assert result.invalid == 0, f"{what}: {result.invalid} invalid samples"
+
+
+def assert_same_image(a, b, blocks: int = 4, what="images"):
+    """Two independent renders (different seeds) estimate the same image: block means of their
+    difference are zero within the standard error both renders' variances predict."""
+    diff = a.image.astype(np.float64) - b.image.astype(np.float64)
+    var = a.variance.astype(np.float64) + b.variance.astype(np.float64)
+    h, w = diff.shape[:2]
+    ys = np.linspace(0, h, blocks + 1).astype(int)
+    xs = np.linspace(0, w, blocks + 1).astype(int)
+    limit = z_limit(3 * blocks * blocks)
+    failures = []
+    for i in range(blocks):
+        for j in range(blocks):
+            d = diff[ys[i]:ys[i + 1], xs[j]:xs[j + 1]].reshape(-1, 3)
+            v = var[ys[i]:ys[i + 1], xs[j]:xs[j + 1]].reshape(-1, 3)
+            n = len(d)
+            se = np.sqrt(v.sum(0)) / n
+            z = np.where(se > 0, d.mean(0) / np.where(se > 0, se, 1), np.where(np.abs(d.mean(0)) < 1e-6, 0, np.inf))
+            for c in range(3):
+                if not abs(z[c]) < limit:
+                    failures.append(f"block ({i},{j}) channel {c}: difference {d.mean(0)[c]:.4g} (z = {z[c]:.2f})")
+    assert not failures, f"{what}: " + "; ".join(failures[:6])
+    assert a.invalid == 0 and b.invalid == 0, f"{what}: invalid samples {a.invalid}, {b.invalid}"
