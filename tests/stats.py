@@ -43,6 +43,7 @@ def _count(k: int = 1):
 def tests_made() -> int:
     return _tests_made
 
+
 MIN_EXPECTED = 5.0
 # Quadrature budget per cell, as a fraction of the cell's Poisson standard deviation sqrt(E): the
 # chi-square statistic moves by at most QUAD_FRACTION^2 per cell (0.0025) through quadrature error.

@@ -1,0 +1,170 @@
+/* Test-only kernels: each work item seeds its own stream with rng_init(seed, gid, 0), draws what one
+ * call of a device routine needs, and writes the routine's results. Directions and colours are
+ * written as 3 floats per item (vstore3). */
+#include "types.h"
+#include "common.h"
+#include "rng.h"
+#include "sampling.h"
+#include "scene.h"
+#include "bvh.h"
+#include "surface.h"
+#include "bsdf.h"
+#include "phase.h"
+#include "media.h"
+#include "lights.h"
+
+/* ---- rng ---- */
+
+/* `count` consecutive floats of the stream (seed, pixel0 + i % npix, sample0 + i / npix). */
+__kernel void rng_floats(__global float *out, uint seed, uint pixel0, uint sample0, int npix, int count) {
+    int i = get_global_id(0);
+    Rng r = rng_init(seed, pixel0 + (uint)(i % npix), sample0 + (uint)(i / npix));
+    for (int k = 0; k < count; k++) out[i * count + k] = rng_next_float(&r);
+}
+
+/* ---- sampling.h ---- */
+
+__kernel void warp_cosine_hemisphere(__global float *dirs, __global float *pdf, uint seed) {
+    int i = get_global_id(0);
+    Rng r = rng_init(seed, i, 0);
+    float3 d = sample_cosine_hemisphere(rng_next_float2(&r));
+    vstore3(d, i, dirs);
+    pdf[i] = sample_cosine_hemisphere_pdf(d);
+}
+
+__kernel void warp_uniform_sphere(__global float *dirs, __global float *pdf, uint seed) {
+    int i = get_global_id(0);
+    Rng r = rng_init(seed, i, 0);
+    vstore3(sample_uniform_sphere(rng_next_float2(&r)), i, dirs);
+    pdf[i] = sample_uniform_sphere_pdf();
+}
+
+__kernel void warp_uniform_triangle(__global float *bary, uint seed) {
+    int i = get_global_id(0);
+    Rng r = rng_init(seed, i, 0);
+    vstore2(sample_uniform_triangle(rng_next_float2(&r)), i, bary);
+}
+
+__kernel void warp_concentric_disk(__global float *pts, uint seed) {
+    int i = get_global_id(0);
+    Rng r = rng_init(seed, i, 0);
+    vstore2(sample_concentric_disk(rng_next_float2(&r)), i, pts);
+}
+
+__kernel void warp_uniform_cone(__global float *dirs, __global float *pdf, uint seed, float cos_max) {
+    int i = get_global_id(0);
+    Rng r = rng_init(seed, i, 0);
+    vstore3(sample_uniform_cone(rng_next_float2(&r), cos_max), i, dirs);
+    pdf[i] = sample_uniform_cone_pdf(cos_max);
+}
+
+__kernel void warp_discrete_cdf(__global const float *cdf, __global int *index, uint seed, int n) {
+    int i = get_global_id(0);
+    Rng r = rng_init(seed, i, 0);
+    index[i] = sample_discrete_cdf(cdf, n, rng_next_float(&r));
+}
+
+__kernel void warp_filter_offset(__global const float *table, __global float *offset, uint seed, int size) {
+    int i = get_global_id(0);
+    Rng r = rng_init(seed, i, 0);
+    offset[i] = sample_filter_offset(table, size, rng_next_float(&r));
+}
+
+/* ---- media.h ---- */
+
+__kernel void medium_distance(__global const Medium *m, __global float *t, __global int *scattered,
+                              __global float *weight, __global float *emission, uint seed, float t_max,
+                              float beta_r, float beta_g, float beta_b) {
+    int i = get_global_id(0);
+    Rng r = rng_init(seed, i, 0);
+    float u_channel = rng_next_float(&r);
+    float u_dist = rng_next_float(&r);
+    MediumSample ms = medium_sample_distance(m, t_max, (float3)(beta_r, beta_g, beta_b), u_channel, u_dist);
+    t[i] = ms.t;
+    scattered[i] = ms.scattered ? 1 : 0;
+    vstore3(ms.weight, i, weight);
+    vstore3(ms.emission, i, emission);
+}
+
+__kernel void medium_tr(__global const Medium *m, __global const float *t, __global float *tr) {
+    int i = get_global_id(0);
+    vstore3(medium_transmittance(m, t[i]), i, tr);
+}
+
+/* ---- phase.h ---- */
+
+/* d_out around the travel direction d_in (3 floats), the returned pdf, and phase_eval of the
+ * cosine between d_in and the sampled d_out. */
+__kernel void phase_sample_dirs(__global const Medium *m, __global const float *d_in, __global float *d_out,
+                                __global float *pdf, __global float *eval, uint seed) {
+    int i = get_global_id(0);
+    Rng r = rng_init(seed, i, 0);
+    float3 din = vload3(0, d_in), d;
+    pdf[i] = phase_sample(m, din, rng_next_float2(&r), &d);
+    vstore3(d, i, d_out);
+    eval[i] = phase_eval(m, dot(din, d));
+}
+
+__kernel void phase_eval_cos(__global const Medium *m, __global const float *cos_theta, __global float *value) {
+    int i = get_global_id(0);
+    value[i] = phase_eval(m, cos_theta[i]);
+}
+
+__kernel void hg_sample_cos(__global float *c, uint seed, float g) {
+    int i = get_global_id(0);
+    Rng r = rng_init(seed, i, 0);
+    c[i] = phase_hg_sample_cos(g, rng_next_float(&r));
+}
+
+/* ---- bsdf.h ---- */
+
+/* One bsdf_sample per item for wo[i]; u1[i] >= 0 replaces the random component choice (edge cases).
+ * info: (sampled, delta). The sampled wi is evaluated again with bsdf_eval. */
+__kernel void bsdf_sample_dirs(__global const Bsdf *b, __global const float *wo_in, __global const float *u1_in,
+                               __global float *wi_out, __global float *weight, __global float *pdf,
+                               __global float *eta, __global int *info, __global float *value,
+                               __global float *eval_pdf, uint seed) {
+    int i = get_global_id(0);
+    Rng r = rng_init(seed, i, 0);
+    float u1 = rng_next_float(&r);
+    float2 u2 = rng_next_float2(&r);
+    if (u1_in[i] >= 0.0f) u1 = u1_in[i];
+    float3 wo = vload3(i, wo_in);
+    BsdfSample s;
+    s.wi = (float3)(0.0f);
+    s.weight = (float3)(0.0f);
+    s.pdf = 0.0f;
+    s.delta = false;
+    bool ok = bsdf_sample(b, wo, u1, u2, &s);
+    vstore3(ok ? s.wi : (float3)(0.0f), i, wi_out);
+    vstore3(ok ? s.weight : (float3)(0.0f), i, weight);
+    pdf[i] = ok ? s.pdf : 0.0f;
+    eta[i] = s.eta;
+    info[2 * i] = ok ? 1 : 0;
+    info[2 * i + 1] = (ok && s.delta) ? 1 : 0;
+    float p;
+    vstore3(bsdf_eval(b, wo, ok ? s.wi : (float3)(0.0f, 0.0f, 1.0f), &p), i, value);
+    eval_pdf[i] = p;
+}
+
+/* bsdf_eval for host-given pairs (wo, wi). */
+__kernel void bsdf_eval_pairs(__global const Bsdf *b, __global const float *wo, __global const float *wi,
+                              __global float *value, __global float *pdf) {
+    int i = get_global_id(0);
+    float p;
+    vstore3(bsdf_eval(b, vload3(i, wo), vload3(i, wi), &p), i, value);
+    pdf[i] = p;
+}
+
+__kernel void fresnel_dielectric_grid(__global const float *cos_i, __global float *f, __global float *cos_t,
+                                      float eta) {
+    int i = get_global_id(0);
+    float ct;
+    f[i] = fresnel_dielectric(cos_i[i], eta, &ct);
+    cos_t[i] = ct;
+}
+
+__kernel void fresnel_conductor_grid(__global const float *cos_i, __global const float *eta_k, __global float *f) {
+    int i = get_global_id(0);
+    vstore3(fresnel_conductor(cos_i[i], vload3(0, eta_k), vload3(1, eta_k)), i, f);
+}
