@@ -19,9 +19,12 @@ typedef struct {
 /* Unpolarized Fresnel reflectance of a dielectric interface. eta = n_transmitted / n_incident for a
  * ray arriving with cos_i > 0; on total internal reflection returns 1 and leaves cos_t at 0. */
 inline float fresnel_dielectric(float cos_i, float eta, float *cos_t) {
-    float sin2_t = (1.0f - cos_i * cos_i) / (eta * eta);
-    if (sin2_t >= 1.0f) { *cos_t = 0.0f; return 1.0f; }
-    float ct = sqrt(1.0f - sin2_t);
+    /* cos_t^2 = 1 - (1 - cos_i^2) / eta^2, rearranged with eta^2 - 1 = (eta - 1)(eta + 1): the
+     * textbook form cancels in float32 at eta = 1 (an index-matched interface then reflects grazing
+     * rays, and totally at cos_i < 2.4e-4), while this one gives cos_t = cos_i and F = 0 there */
+    float cos2_t = (cos_i * cos_i + (eta - 1.0f) * (eta + 1.0f)) / (eta * eta);
+    if (cos2_t <= 0.0f) { *cos_t = 0.0f; return 1.0f; }
+    float ct = sqrt(cos2_t);
     *cos_t = ct;
     float rs = (cos_i - eta * ct) / (cos_i + eta * ct);
     float rp = (eta * cos_i - ct) / (eta * cos_i + ct);

@@ -7,8 +7,8 @@
 inline void camera_ray(const SceneData *sc, __global const float *filter_table, int px, int py, float2 u,
                        float3 *o, float3 *d, float *t_max) {
     __global const RenderParams *rp = sc->params;
-    float fx = sample_filter_offset(filter_table, rp->filter_size, u.x);
-    float fy = sample_filter_offset(filter_table, rp->filter_size, u.y);
+    float fx = sample_filter_offset(filter_table, rp->filter_size, rp->filter_radius, u.x);
+    float fy = sample_filter_offset(filter_table, rp->filter_size, rp->filter_radius, u.y);
     float sx = ((float)px + 0.5f + fx) / (float)rp->width;
     float sy = ((float)py + 0.5f + fy) / (float)rp->height;
     float3 dc = (float3)((1.0f - 2.0f * sx) * rp->tan_half[0], (1.0f - 2.0f * sy) * rp->tan_half[1], 1.0f);

@@ -111,7 +111,7 @@ inline float3 integrator_radiance(const SceneData *sc, Rng *rng, float3 o, float
                     float u_pick = rng_next_float(rng);
                     float2 ul = rng_next_float2(rng);
                     if (light_sample(sc, p, u_pick, ul, &ls) && max_component(ls.value) > 0.0f) {
-                        float ph = phase_eval(m, dot(d, ls.wi));
+                        float ph = phase_eval(m, d, ls.wi);
                         L += beta * nee_contribution(sc, &ls, (float3)(ph), ph, p, medium);
                     }
                 }

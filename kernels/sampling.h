@@ -63,14 +63,16 @@ inline int sample_discrete_cdf(const __global float *cdf, int n, float u) {
     return lo;
 }
 
-/* Offset from a pixel centre distributed like the reconstruction filter along one axis: the host
- * tabulates the filter's inverse CDF on `size` points spanning [-radius, radius]. Sampling the filter
- * (instead of splatting weighted samples) converges to the same normalized filtered image. */
-inline float sample_filter_offset(const __global float *inv_cdf, int size, float u) {
-    float x = u * (float)(size - 1);
-    int i = min((int)x, size - 2);
-    float f = x - (float)i;
-    return mix(inv_cdf[i], inv_cdf[i + 1], f);
+/* Offset from a pixel centre distributed like the reconstruction filter along one axis. The host
+ * tabulates the filter's normalized CDF at `size` equally spaced x in [-radius, radius]; inverting
+ * it interval by interval samples each interval's exact share of the filter (sampling the filter,
+ * instead of splatting weighted samples, converges to the same normalized filtered image). Within an
+ * interval (radius / 2048 wide) the density is flat, far below any visible or measurable error. */
+inline float sample_filter_offset(const __global float *cdf, int size, float radius, float u) {
+    int k = sample_discrete_cdf(cdf + 1, size - 1, u);
+    float lo = cdf[k], hi = cdf[k + 1];
+    float f = hi > lo ? clamp((u - lo) / (hi - lo), 0.0f, 1.0f) : 0.5f;
+    return radius * (2.0f * ((float)k + f) / (float)(size - 1) - 1.0f);
 }
 
 #endif

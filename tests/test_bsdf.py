@@ -255,16 +255,6 @@ def test_dielectric_index_matched(cl_env, prog, cos_i):
         assert np.all(s["weight"] == 1.0) and np.all(s["eta"] == 1.0)
 
 
-# Known defect (reported, not fixed here): fresnel_dielectric computes cos_t^2 as
-# 1 - (1 - cos_i^2) / eta^2, which cancels in float32 when eta is 1: cos_t misses cos_i by an ulp or
-# more, so F comes out ~1e-14 .. 1e-5 instead of 0 (u1 = 0, probability 2^-24, then picks a
-# reflection), and below cos_i ~ 2.4e-4 (cos_i^2 < eps) 1 - cos_i^2 rounds to 1: "total internal
-# reflection" at an index-matched interface. (cos_i^2 + eta^2 - 1) / eta^2 is exact at eta = 1.
-INDEX_MATCHED = pytest.mark.xfail(strict=True, reason="kernels/bsdf.h fresnel_dielectric: F > 0 at eta = 1 "
-                                  "(cancellation in 1 - (1 - cos_i^2) / eta^2), up to 1 at grazing incidence")
-
-
-@INDEX_MATCHED
 def test_dielectric_index_matched_grazing(cl_env, prog):
     b = make_bsdf("dielectric", eta=1.0)
     wos = np.array([index_matched_wo(c, side) for c in (1e-4, 2e-4) for side in (1, -1)])
@@ -273,7 +263,6 @@ def test_dielectric_index_matched_grazing(cl_env, prog):
     assert not refl.any(), f"eta = 1, grazing incidence: {refl.sum()} of {len(refl)} samples reflected"
 
 
-@INDEX_MATCHED
 def test_dielectric_index_matched_u1_zero(cl_env, prog):
     b = make_bsdf("dielectric", eta=1.0)
     wos = np.array([index_matched_wo(c, side) for c in INDEX_MATCHED_COS for side in (1, -1)])
@@ -291,7 +280,6 @@ def test_fresnel_dielectric_function(cl_env, prog):
     check_fresnel_dielectric(cl_env, prog, (1.5, 1 / 1.5, 2.4, 1.01, 1 / 1.01))
 
 
-@INDEX_MATCHED
 def test_fresnel_dielectric_index_matched(cl_env, prog):
     """No interface, no reflection: F = 0 at every angle."""
     check_fresnel_dielectric(cl_env, prog, (1.0,))

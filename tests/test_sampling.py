@@ -143,46 +143,37 @@ def filter_profile(f):
     return lambda x: np.maximum(0.0, np.exp(-x * x / (2 * s * s)) - floor) * (np.abs(x) <= r) / norm
 
 
-def table_density(table):
-    """Density of mix(table[i], table[i + 1], f) at u = (i + f) / (size - 1): piecewise constant,
-    1 / (size - 1) of the mass spread evenly over each table interval."""
+def table_density(table, radius):
+    """Density sample_filter_offset draws from a CDF table: each interval of the equally spaced grid
+    on [-radius, radius] holds cdf[k + 1] - cdf[k] of the mass, spread evenly."""
     t = table.astype(np.float64)
-    mass = 1.0 / (len(t) - 1)
-    dens = mass / np.diff(t)
+    edges = np.linspace(-radius, radius, len(t))
+    dens = np.diff(t) / np.diff(edges)
 
     def pdf(x):
-        i = np.clip(np.searchsorted(t, x, side="right") - 1, 0, len(dens) - 1)
-        return np.where((x >= t[0]) & (x < t[-1]), dens[i], 0.0)
+        i = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, len(dens) - 1)
+        return np.where((x >= edges[0]) & (x < edges[-1]), dens[i], 0.0)
     return pdf
 
 
 def sample_filter(cl_env, prog, f, seed):
     table = filter_table(f)
-    (x,) = run_kernel(cl_env, prog, "warp_filter_offset", N, [(f32, ())], u32(seed), i32(len(table)), inputs=[table])
+    (x,) = run_kernel(cl_env, prog, "warp_filter_offset", N, [(f32, ())], u32(seed), i32(len(table)), f32(f.radius),
+                      inputs=[table])
     return table, x
 
 
 @pytest.mark.parametrize("f", FILTERS, ids=FILTER_IDS)
 def test_filter_offset_follows_its_table(cl_env, prog, f):
-    """sample_filter_offset reproduces the distribution its inverse-CDF table describes."""
+    """sample_filter_offset reproduces the distribution its CDF table describes."""
     table, x = sample_filter(cl_env, prog, f, 17)
     r = f.radius
     assert np.abs(x).max() <= r
     hi = float(np.nextafter(np.float32(r), np.float32(np.inf)))
-    stats.chi2_1d(x, table_density(table), -r, hi, bins=51, what=f"sample_filter_offset ({f.kind} table)")
+    stats.chi2_1d(x, table_density(table, r), -r, hi, bins=51, what=f"sample_filter_offset ({f.kind} table)")
 
 
-# Known defect (reported, not fixed here): the table is the inverse CDF at 257 evenly spaced u, and
-# linear interpolation spreads each 1/256 of the mass evenly over its interval. Where the density
-# falls to zero (tent and gaussian edges) the outermost interval is wide, so the tails come out
-# flat: at 1e6 samples the gaussian's outer cells get ~50x their share, the tent's ~2x.
-TABLE_TAILS = pytest.mark.xfail(strict=True, reason="filter_table's evenly spaced inverse CDF flattens the "
-                                "filter's tails (volcl/pack.py filter_table + kernels/sampling.h "
-                                "sample_filter_offset)")
-
-
-@pytest.mark.parametrize("f", [pytest.param(f, marks=() if f.kind == "box" else TABLE_TAILS) for f in FILTERS],
-                         ids=FILTER_IDS)
+@pytest.mark.parametrize("f", FILTERS, ids=FILTER_IDS)
 def test_filter_offset_follows_filter_profile(cl_env, prog, f):
     """End to end: table (volcl.pack.filter_table) plus kernel sample the normalized filter profile."""
     total = stats.integral_1d(filter_profile(f), -f.radius, f.radius)

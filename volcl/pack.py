@@ -15,7 +15,7 @@ from .bvh import build_bvh
 from .features import detect
 from .scene.model import Camera, Filter, Scene
 
-FILTER_TABLE_SIZE = 257
+FILTER_TABLE_SIZE = 4097
 
 
 @dataclass
@@ -88,22 +88,28 @@ def _triangles(scene, shape_index):
             np.concatenate(normal_owner))
 
 
-def filter_table(f: Filter, size: int = FILTER_TABLE_SIZE) -> np.ndarray:
-    """Inverse CDF of the 1D reconstruction filter on [-radius, radius], tabulated for the kernel."""
+def filter_profile(f: Filter, x: np.ndarray) -> np.ndarray:
+    """The 1D reconstruction filter's (unnormalized) weight at offsets x, in pixels."""
     r = f.radius
-    x = np.linspace(-r, r, 4097)
     if f.kind == "box":
-        w = np.ones_like(x)
-    elif f.kind == "tent":
-        w = np.maximum(0.0, 1.0 - np.abs(x) / r)
-    else:   # gaussian, shifted to reach zero at the radius (Mitsuba and Nori)
-        w = np.maximum(0.0, np.exp(-x * x / (2 * f.stddev ** 2)) - math.exp(-r * r / (2 * f.stddev ** 2)))
-    cdf = np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(x))])
-    cdf /= cdf[-1]
-    u = np.linspace(0.0, 1.0, size)
-    # np.interp needs increasing xp: drop flat stretches (zero weight) of the cdf
-    keep = np.concatenate([[True], np.diff(cdf) > 0])
-    return np.interp(u, cdf[keep], x[keep]).astype(np.float32)
+        return (np.abs(x) <= r).astype(np.float64)
+    if f.kind == "tent":
+        return np.maximum(0.0, 1.0 - np.abs(x) / r)
+    # gaussian, shifted to reach zero at the radius (Mitsuba and Nori)
+    return np.maximum(0.0, np.exp(-x * x / (2 * f.stddev ** 2)) - math.exp(-r * r / (2 * f.stddev ** 2)))
+
+
+def filter_table(f: Filter, size: int = FILTER_TABLE_SIZE) -> np.ndarray:
+    """The filter's normalized CDF at `size` equally spaced offsets spanning [-radius, radius], for
+    sample_filter_offset. Each interval's mass is integrated with 64-point Gauss-Legendre, so the
+    sampled shares are the filter's own to float64 precision."""
+    edges = np.linspace(-f.radius, f.radius, size)
+    nodes, weights = np.polynomial.legendre.leggauss(64)
+    half = 0.5 * np.diff(edges)
+    mid = 0.5 * (edges[1:] + edges[:-1])
+    mass = (filter_profile(f, mid[:, None] + half[:, None] * nodes[None]) * weights).sum(1) * half
+    cdf = np.concatenate([[0.0], np.cumsum(mass)])
+    return (cdf / cdf[-1]).astype(np.float32)
 
 
 def camera_tangents(cam: Camera) -> tuple[float, float]:

@@ -64,10 +64,11 @@ __kernel void warp_discrete_cdf(__global const float *cdf, __global int *index, 
     index[i] = sample_discrete_cdf(cdf, n, rng_next_float(&r));
 }
 
-__kernel void warp_filter_offset(__global const float *table, __global float *offset, uint seed, int size) {
+__kernel void warp_filter_offset(__global const float *table, __global float *offset, uint seed, int size,
+                                 float radius) {
     int i = get_global_id(0);
     Rng r = rng_init(seed, i, 0);
-    offset[i] = sample_filter_offset(table, size, rng_next_float(&r));
+    offset[i] = sample_filter_offset(table, size, radius, rng_next_float(&r));
 }
 
 /* ---- media.h ---- */
@@ -94,7 +95,7 @@ __kernel void medium_tr(__global const Medium *m, __global const float *t, __glo
 /* ---- phase.h ---- */
 
 /* d_out around the travel direction d_in (3 floats), the returned pdf, and phase_eval of the
- * cosine between d_in and the sampled d_out. */
+ * sampled direction. */
 __kernel void phase_sample_dirs(__global const Medium *m, __global const float *d_in, __global float *d_out,
                                 __global float *pdf, __global float *eval, uint seed) {
     int i = get_global_id(0);
@@ -102,18 +103,28 @@ __kernel void phase_sample_dirs(__global const Medium *m, __global const float *
     float3 din = vload3(0, d_in), d;
     pdf[i] = phase_sample(m, din, rng_next_float2(&r), &d);
     vstore3(d, i, d_out);
-    eval[i] = phase_eval(m, dot(din, d));
+    eval[i] = phase_eval(m, din, d);
 }
 
+/* phase_eval between +z and the direction at cos_theta[i] from it. */
 __kernel void phase_eval_cos(__global const Medium *m, __global const float *cos_theta, __global float *value) {
     int i = get_global_id(0);
-    value[i] = phase_eval(m, cos_theta[i]);
+    float c = cos_theta[i];
+    float3 d_out = (float3)(sqrt(fmax(0.0f, 1.0f - c * c)), 0.0f, c);
+    value[i] = phase_eval(m, (float3)(0.0f, 0.0f, 1.0f), d_out);
+}
+
+/* HG at distance w[i] from its peak. */
+__kernel void phase_hg_eval_at_w(__global const float *w, __global float *value, float g) {
+    int i = get_global_id(0);
+    value[i] = phase_hg_eval_w(g, w[i]);
 }
 
 __kernel void hg_sample_cos(__global float *c, uint seed, float g) {
     int i = get_global_id(0);
     Rng r = rng_init(seed, i, 0);
-    c[i] = phase_hg_sample_cos(g, rng_next_float(&r));
+    float w = phase_hg_sample_w(fabs(g), rng_next_float(&r));
+    c[i] = g >= 0.0f ? 1.0f - w : w - 1.0f;
 }
 
 /* ---- bsdf.h ---- */
