@@ -1,6 +1,7 @@
 """Participating media against analytic answers (see ../shared/docs/volumetrics.md, "Checks with
 known answers"), with tolerances from the renders' own variance."""
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -9,6 +10,7 @@ from imagestats import assert_mean_matches
 from scenebuild import (box_mesh, camera, constant_env, diffuse, furnace, look_at, medium, quad_mesh, scene,
                         sphere)
 from volcl.render import render
+from volcl.scene import load
 from volcl.scene.model import Bsdf, Shape, rgb
 
 
@@ -94,3 +96,30 @@ def test_nested_media_with_camera_inside_the_outer_one(device):
     core = medium([2.0, 4.0, 1.0], 1.0, g=0.8)
     r = _sphere_of_medium(Bsdf("null"), core, cam_medium=fog, outer=fog)
     assert_mean_matches(r, 1.0, what="nested media")
+
+
+NORI_FURNACE = Path(__file__).resolve().parent.parent.parent / "shared" / "nori" / "furnace" / "furnace.obj"
+
+
+@pytest.mark.skipif(not NORI_FURNACE.is_file(), reason="../shared/nori is not beside the checkout")
+@pytest.mark.parametrize("g", [-0.9, 0.0, 0.9])
+def test_nori_furnace_filled_with_albedo_one_medium(device, tmp_path, g):
+    """Nori's own furnace box (camera inside, emitting 1, diffuse albedo 0.5) filled with an
+    albedo-1 medium through the Nori dialect's scene-level <medium>: L = 1 / (1 - a) = 2."""
+    xml = tmp_path / "furnace_medium.xml"
+    xml.write_text(f"""<scene>
+    <integrator type="vol_path"/>
+    <camera type="perspective"><float name="fov" value="10"/>
+        <integer name="width" value="2"/><integer name="height" value="2"/></camera>
+    <sampler type="independent"><integer name="sampleCount" value="4096"/></sampler>
+    <medium type="homogeneous">
+        <color name="sigma_s" value="3, 3, 3"/><color name="sigma_a" value="0, 0, 0"/>
+        <float name="g" value="{g}"/>
+    </medium>
+    <mesh type="obj"><string name="filename" value="{NORI_FURNACE}"/>
+        <bsdf type="diffuse"><color name="albedo" value="0.5, 0.5, 0.5"/></bsdf>
+        <emitter type="area"><color name="radiance" value="1, 1, 1"/></emitter>
+    </mesh>
+</scene>""")
+    r = render(load(xml), device=device)
+    assert_mean_matches(r, 2.0, blocks=1, what=f"Nori furnace with medium g={g}")
