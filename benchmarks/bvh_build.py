@@ -18,16 +18,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from volcl.bvh import build_bvh, node_depths, sah_cost  # noqa: E402
+from common import cpu_model  # noqa: E402
 
-
-def cpu_model():
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def bumpy_sphere(rng, n_tris):

@@ -35,6 +35,7 @@ ROOT = HERE.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(HERE))
 import mitsuba_ref  # noqa: E402
+from common import parse_defines  # noqa: E402
 
 DEFAULT_TOOL = ROOT.parent / "shared" / "tools" / "compare_renders.py"
 
@@ -42,15 +43,6 @@ DEFAULT_TOOL = ROOT.parent / "shared" / "tools" / "compare_renders.py"
 def log(msg):
     print(msg, file=sys.stderr, flush=True)
 
-
-def parse_defines(items):
-    out = {}
-    for item in items or []:
-        if "=" not in item:
-            raise SystemExit(f"-D {item!r}: expected name=value")
-        k, v = item.split("=", 1)
-        out[k.strip()] = v
-    return out
 
 
 def render_volcl(scene_path, out, spp, seed, defines, device):

@@ -33,6 +33,8 @@ import subprocess
 import sys
 import time
 
+from common import parse_defines
+
 ENV_VAR = "VOLCL_MITSUBA_PYTHON"
 NOT_FOUND = "Mitsuba 3 not found: pass --mitsuba-python"
 RESULT_TAG = "MITSUBA_REF_RESULT "
@@ -134,21 +136,12 @@ def render_mitsuba(scene: str, out: str | None, python: str, variant: str = DEFA
 # ----------------------------------------------------------------------------------------------
 # subprocess side: runs in the interpreter that has Mitsuba
 
-def _parse_defines(items):
-    out = {}
-    for item in items or []:
-        if "=" not in item:
-            raise SystemExit(f"-D {item!r}: expected name=value")
-        k, v = item.split("=", 1)
-        out[k.strip()] = v
-    return out
-
 
 def _render_here(args) -> dict:
     import drjit as dr
     import mitsuba as mi
     mi.set_variant(args.variant)
-    defines = _parse_defines(args.define)
+    defines = parse_defines(args.define)
     # spp goes to mi.render, not load_file: Mitsuba rejects parameters a file does not use
     scene = mi.load_file(args.render, **defines)
 

@@ -55,20 +55,12 @@ ROOT = HERE.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(HERE))
 import mitsuba_ref  # noqa: E402
+from common import cpu_model, parse_defines  # noqa: E402
 
 
 def log(msg):
     print(msg, file=sys.stderr, flush=True)
 
-
-def cpu_model():
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def cores():
@@ -92,15 +84,6 @@ def table(header, rows):
     out += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
     return "\n".join(out)
 
-
-def parse_defines(items):
-    out = {}
-    for item in items or []:
-        if "=" not in item:
-            raise SystemExit(f"-D {item!r}: expected name=value")
-        k, v = item.split("=", 1)
-        out[k.strip()] = v
-    return out
 
 
 # ------------------------------------------------------------------------------------ volcl

@@ -16,6 +16,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+from common import cpu_model
+
 ROOT = Path(__file__).resolve().parent.parent
 
 BUILD_PROBE = """
@@ -87,8 +89,7 @@ def main():
                                                            args.device)
         rows.append((scene.name, feats, cold_s, warm_s, cold_a, warm_a, sps_spec, sps_all))
         print(f"{scene.name}: done", file=sys.stderr)
-    cpu = next((line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo") if line.startswith("model name")), "?")
-    print(f"device {device_name}; CPU {cpu}, {os.cpu_count()} cores; {args.width}x{args.height}, {args.spp} spp, "
+    print(f"device {device_name}; CPU {cpu_model()}, {os.cpu_count()} cores; {args.width}x{args.height}, {args.spp} spp, "
           f"best of {args.repeat}\n")
     print("| scene | features | build cold / warm s | all-features build cold / warm s | M samples/s specialized | "
           "M samples/s all features | ratio |")
