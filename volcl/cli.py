@@ -58,9 +58,12 @@ def _render_one(path, out, args, device):
     spp = args.spp or scene.spp
     renderer = Renderer(scene, device=device, features=_features(args), seed=args.seed)
     if args.verbose:
+        build = (f"kernel build {renderer.build_seconds:.2f} s (the first of this kernel version and feature set "
+                 f"on this machine)" if renderer.build_was_cold else
+                 f"kernel build {renderer.build_seconds:.2f} s from the caches (the first build here took "
+                 f"{renderer.cold_build_seconds:.2f} s)")
         print(f"{path}: {renderer.packed.triangle_count} triangles, {renderer.packed.sphere_count} spheres, "
-              f"BVH {renderer.packed.bvh_seconds:.2f} s, kernel build {renderer.build_seconds:.2f} s",
-              file=sys.stderr)
+              f"BVH {renderer.packed.bvh_seconds:.2f} s, {build}", file=sys.stderr)
     with _progress_bar(spp, Path(path).name, args.quiet) as bar:
         result = renderer.render(spp, progress=bar.update)
     meta = {"scene": str(Path(path).resolve()), "spp": result.spp, "seed": renderer.seed,

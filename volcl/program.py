@@ -8,6 +8,8 @@ options carry a hash of every kernel file, so an edited header can never reuse a
 from __future__ import annotations
 
 import hashlib
+import json
+import os
 import time
 from functools import lru_cache
 from pathlib import Path
@@ -66,3 +68,28 @@ def build_program(ctx, features: dict[str, bool], source_file=ENTRY_FILE,
 
 def build_seconds(ctx, features, source_file: str = ENTRY_FILE, extra: tuple[str, ...] = ()) -> float:
     return last_build_seconds.get((id(ctx), str(source_file), tuple(sorted(features.items())), extra), 0.0)
+
+
+def _build_log_path() -> Path:
+    return Path(os.environ.get("POCL_CACHE_DIR", ".")).parent / "builds.json"
+
+
+def note_build(device_name: str, features: dict[str, bool], seconds: float) -> tuple[float, bool]:
+    """Remember the first (cold) build time of each kernel version, feature set and device, so a
+    later warm build can be shown beside it. Returns (cold seconds, whether this build was it)."""
+    key = f"{sources_hash()} {device_name} {feat.describe(features)}"
+    path = _build_log_path()
+    try:
+        log = json.loads(path.read_text())
+    except (OSError, ValueError):
+        log = {}
+    if key in log:
+        return float(log[key]), False
+    log[key] = round(seconds, 4)
+    try:
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_text(json.dumps(log, indent=0))
+        os.replace(tmp, path)
+    except OSError:
+        pass    # a read-only cache only costs the cold/warm comparison
+    return seconds, True

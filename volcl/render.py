@@ -11,7 +11,7 @@ from . import device as devmod
 from .device import cl
 from .features import describe
 from .pack import pack
-from .program import build_program, build_seconds
+from .program import build_program, build_seconds, note_build
 from .scene.model import Scene
 
 # Work items per launch: enough to fill a device, small enough to keep a launch short.
@@ -56,6 +56,8 @@ class Renderer:
         t0 = time.perf_counter()
         self.program = build_program(self.ctx, self.packed.features)
         self.build_seconds = build_seconds(self.ctx, self.packed.features) or (time.perf_counter() - t0)
+        self.cold_build_seconds, self.build_was_cold = note_build(self.device.name, self.packed.features,
+                                                                  self.build_seconds)
         self.kernel = cl.Kernel(self.program, "render_pass")
         mf = cl.mem_flags
         self.buffers = [cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR,
