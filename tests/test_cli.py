@@ -1,5 +1,7 @@
 """The volcl command line: rendering to EXR and PNG, devices, Nori t-tests, batch behaviour, errors."""
+import hashlib
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -7,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from volcl import __version__ as volcl_version
 from volcl.image import read_image
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -33,6 +36,13 @@ def test_render_png_and_exr_with_metadata(tmp_path):
     assert img.shape == (30, 40, 6)    # RGB and the variance layer
     assert attrs["volcl:spp"] == 3 and attrs["volcl:seed"] == 5 and attrs["volcl:invalid_samples"] == 0
     assert "spheres" in attrs["volcl:features"]
+    meta = {k.split(":", 1)[1]: v for k, v in attrs.items() if k.startswith("volcl:")}
+    assert set(meta) == {"scene", "scene_sha256", "defines", "spp", "spp_requested", "complete", "seed",
+                         "device", "features", "kernel_sha256", "render_seconds", "version", "invalid_samples"}
+    assert meta["scene"] == str(ROOT / "scenes" / "cbox.xml") and meta["version"] == volcl_version
+    assert meta["scene_sha256"] == hashlib.sha256((ROOT / "scenes" / "cbox.xml").read_bytes()).hexdigest()
+    assert meta["spp_requested"] == 3 and meta["complete"] == 1 and meta["render_seconds"] > 0
+    assert meta["device"].split()[0].count(":") == 1 and meta["defines"] == "{}"
     assert np.isfinite(img).all() and img[..., :3].mean() > 0
     assert not list(tmp_path.glob(".*")), "temporary files left behind"
 
@@ -76,6 +86,11 @@ def test_batch_renders_the_good_scenes_and_reports_the_broken_one(tmp_path):
     assert r.returncode == 1
     assert (tmp_path / "cbox.exr").is_file()
     assert "1 of 2 scenes rendered" in r.stdout and "FAILED" in r.stdout and "broken.xml" in r.stdout
+    table = r.stdout[r.stdout.index("scene "):].splitlines()
+    assert table[0].split() == ["scene", "output", "spp", "seconds", "status"]
+    assert re.match(rf"{re.escape(str(good))}\s+cbox\.exr\s+1\s+[\d.]+\s+ok$", table[1]), r.stdout
+    assert re.match(rf"{re.escape(str(bad))}\s+broken\.exr\s+-\s+-\s+FAILED$", table[2]), r.stdout
+    assert "none.obj" in r.stdout and "none.obj" in r.stderr     # why it failed, in the table and as it happens
 
 
 @pytest.mark.skipif(not (SHARED / "nori" / "furnace").is_dir(), reason="../shared/nori is not beside the checkout")

@@ -5,7 +5,6 @@ import argparse
 import math
 import sys
 import time
-from pathlib import Path
 
 from . import __version__
 from .errors import VolclError
@@ -46,58 +45,15 @@ def _features(args):
         raise VolclError(f"--features: {exc}") from None
 
 
-def _progress_bar(total, desc, quiet):
-    from tqdm import tqdm
-    return tqdm(total=total, desc=desc, unit="spp", disable=quiet, leave=False, file=sys.stderr)
-
-
-def _render_one(path, out, args, device):
-    from .image import write_image
-    from .render import Renderer
-    scene = _load(path, args)
-    spp = args.spp or scene.spp
-    renderer = Renderer(scene, device=device, features=_features(args), seed=args.seed)
-    if args.verbose:
-        build = (f"kernel build {renderer.build_seconds:.2f} s (the first of this kernel version and feature set "
-                 f"on this machine)" if renderer.build_was_cold else
-                 f"kernel build {renderer.build_seconds:.2f} s from the caches (the first build here took "
-                 f"{renderer.cold_build_seconds:.2f} s)")
-        print(f"{path}: {renderer.packed.triangle_count} triangles, {renderer.packed.sphere_count} spheres, "
-              f"BVH {renderer.packed.bvh_seconds:.2f} s, {build}", file=sys.stderr)
-    with _progress_bar(spp, Path(path).name, args.quiet) as bar:
-        result = renderer.render(spp, progress=bar.update)
-    meta = {"scene": str(Path(path).resolve()), "spp": result.spp, "seed": renderer.seed,
-            "device": result.device, "features": result.stats["features"],
-            "render_seconds": round(result.seconds, 3), "version": __version__,
-            "invalid_samples": result.invalid}
-    layers = {"variance": result.variance} if Path(out).suffix.lower() == ".exr" else None
-    write_image(out, result.image, meta, layers)
-    print(f"{out}: {result.spp} spp in {result.seconds:.2f} s, {result.samples_per_second / 1e6:.2f} M samples/s, "
-          f"invalid samples {result.invalid}, device {result.device}, features {result.stats['features']}")
-    return result
-
-
 def cmd_render(args):
-    from . import device as devmod
-    scenes = args.scenes
-    if args.output and len(scenes) > 1:
-        raise VolclError("-o names one output file; with several scenes, outputs are named after the scenes")
-    device = devmod.choose(args.device)
-    failures = []
-    for path in scenes:
-        out = args.output or str(Path(Path(path).name).with_suffix(".exr"))
-        try:
-            _render_one(path, out, args, device)
-        except VolclError as exc:
-            if len(scenes) == 1:
-                raise
-            print(f"error: {exc}", file=sys.stderr)
-            failures.append((path, str(exc)))
-    if len(scenes) > 1:
-        print(f"\n{len(scenes) - len(failures)} of {len(scenes)} scenes rendered")
-        for path, why in failures:
-            print(f"  FAILED {path}: {why}")
-    return 1 if failures else 0
+    from . import batch
+    if args.checkpoint_every < 0:
+        raise VolclError("--checkpoint-every: expected minutes >= 0 (0 disables checkpoints)")
+    if args.spp is not None and args.spp < 1:
+        raise VolclError(f"--spp {args.spp}: expected a positive sample count")
+    defines = _defines(args.define)
+    features = _features(args)
+    return batch.run(args, args.device, lambda path: _load(path, args), defines, features)
 
 
 def cmd_devices(args):
@@ -190,10 +146,18 @@ def main(argv=None):
 
     r = sub.add_parser("render", help="render one or more scenes")
     r.add_argument("scenes", nargs="+", metavar="SCENE")
-    r.add_argument("-o", "--output", help="output file; .exr (linear float) or .png (sRGB)")
+    r.add_argument("-o", "--output", help="output file of a single scene; .exr (linear float) or .png (sRGB)")
+    r.add_argument("--output-dir", metavar="DIR",
+                   help="folder for outputs named after the scenes (default: the working folder)")
     r.add_argument("--spp", type=int, help="samples per pixel (default: the scene's sampler)")
     r.add_argument("--seed", type=int)
-    r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--checkpoint-every", type=float, default=5.0, metavar="MINUTES",
+                   help="save the render's state beside the output every MINUTES (default 5; 0: never)")
+    r.add_argument("--resume", action="store_true",
+                   help="continue from OUTPUT.checkpoint.npz where one exists; keep finished outputs")
+    r.add_argument("--keep-checkpoint", action="store_true",
+                   help="keep the checkpoint of a finished render (to add samples later with --resume --spp)")
+    r.add_argument("-q", "--quiet", action="store_true", help="no progress bar (or progress lines in logs)")
     scene_opts(r)
     r.set_defaults(func=cmd_render)
 
@@ -220,9 +184,10 @@ def main(argv=None):
     except VolclError as exc:
         print(f"volcl: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("volcl: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:     # before the render's handlers, or a second signal
+        signum = getattr(exc, "signum", 2)
+        print("volcl: interrupted; nothing more written", file=sys.stderr)
+        return 128 + signum
 
 
 if __name__ == "__main__":

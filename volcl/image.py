@@ -23,15 +23,31 @@ def srgb_encode(linear: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
 
 
-def write_image(path, image: np.ndarray, metadata: dict | None = None, layers: dict | None = None) -> Path:
-    """Write `image` (h, w, 3) linear radiance. `layers` adds named float channels to EXR files
-    (e.g. {"variance": (h, w, 3)}); `metadata` becomes header attributes."""
+def new_file_mode() -> int:
+    """The mode open() would give a new file (mkstemp's temporary files are 0600)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+def check_writable(path) -> Path:
+    """Raise VolclError now, not after an hour of rendering, if `path` cannot be written."""
     path = Path(path)
     ext = path.suffix.lower()
     if ext not in FLOAT_FORMATS | BYTE_FORMATS:
         raise VolclError(f"cannot write {path}: unsupported extension {ext!r}; use .exr or .png")
-    if not path.parent.exists():
+    if not path.parent.is_dir():
         raise VolclError(f"cannot write {path}: folder {path.parent} does not exist")
+    if not os.access(path.parent, os.W_OK):
+        raise VolclError(f"cannot write {path}: folder {path.parent} is not writable")
+    return path
+
+
+def write_image(path, image: np.ndarray, metadata: dict | None = None, layers: dict | None = None) -> Path:
+    """Write `image` (h, w, 3) linear radiance. `layers` adds named float channels to EXR files
+    (e.g. {"variance": (h, w, 3)}); `metadata` becomes header attributes."""
+    path = check_writable(path)
+    ext = path.suffix.lower()
     h, w = image.shape[:2]
     names = ["R", "G", "B"]
     pixels = np.asarray(image, np.float32)[..., :3]
@@ -58,6 +74,7 @@ def write_image(path, image: np.ndarray, metadata: dict | None = None, layers: d
         out.close()
         if not ok:
             raise VolclError(f"cannot write {path}: {oiio.geterror()}")
+        os.chmod(tmp, new_file_mode())
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):

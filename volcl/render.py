@@ -1,7 +1,17 @@
 """Rendering on the device: upload the packed scene once, launch one sample pass at a time,
-accumulate on the device, and read back the mean image with its per-pixel variance."""
+accumulate on the device, and read back the mean image with its per-pixel variance.
+
+Accumulation layout. The device keeps `slots` accumulators per pixel (several when the image is
+too small to fill the device with one sample per pixel). Sample index i of a pixel always lands in
+slot i % slots, and each slot adds its samples in increasing sample index, so the float32 sums,
+and with them the image, are bit-identical however the samples were grouped: one render() call or
+many, a checkpoint restored in another process, any launch size. `slots` depends on the image
+size only, never on the device or on timing. (A different `slots` partitions the samples
+differently and changes the last bits; the Renderer's `slots` argument exists for tests.)
+"""
 from __future__ import annotations
 
+import hashlib
 import time
 from dataclasses import dataclass, field
 
@@ -17,6 +27,11 @@ from .scene.model import Scene
 # Work items per launch: enough to fill a device, small enough to keep a launch short.
 MIN_ITEMS = 1 << 14
 MAX_ITEMS = 1 << 19
+# GPUs that drive a display reset kernels running longer than a watchdog limit (about 2 s on
+# Windows, 5 s on X11), and a desktop stutters long before that: on a GPU each launch is kept
+# under this many seconds by sizing the next launch from the time the last one took.
+GPU_LAUNCH_SECONDS = 0.1
+_DEFAULT = object()
 
 
 @dataclass
@@ -38,13 +53,19 @@ class RenderResult:
 
 
 class Renderer:
-    """A scene uploaded to one device with its program built, ready for sample passes."""
+    """A scene uploaded to one device with its program built, ready for sample passes.
+
+    `slots` and `tile` (pixels per launch) override the defaults, for tests. `launch_seconds` is
+    the time budget of one launch: by default GPU_LAUNCH_SECONDS on GPUs and none elsewhere (a CPU
+    device runs fixed launches of up to MAX_ITEMS work items, with no timing in between).
+    """
 
     ARG_ORDER = ("nodes", "prim_ids", "triangles", "normals", "spheres", "shapes", "bsdfs", "lights",
                  "light_tri_cdf", "light_tris", "media", "params", "filter_table")
 
     def __init__(self, scene: Scene, device: devmod.DeviceInfo | None = None, features: dict | None = None,
-                 seed: int | None = None):
+                 seed: int | None = None, slots: int | None = None, tile: int | None = None,
+                 launch_seconds=_DEFAULT):
         self.scene = scene
         self.device = device or devmod.choose()
         self.packed = pack(scene, features)
@@ -65,8 +86,18 @@ class Renderer:
                         for name in self.ARG_ORDER]
         self.width, self.height = scene.camera.width, scene.camera.height
         self.npix = self.width * self.height
-        self.slots = int(np.clip(MIN_ITEMS // self.npix, 1, 4096))
-        self.tile = max(1, MAX_ITEMS // self.slots)
+        self.slots = int(slots) if slots else int(np.clip(MIN_ITEMS // self.npix, 1, 4096))
+        if launch_seconds is _DEFAULT:
+            launch_seconds = GPU_LAUNCH_SECONDS if self.device.kind == "gpu" else None
+        self.launch_seconds = launch_seconds
+        if tile:
+            self.tile = int(tile)
+        elif launch_seconds is None:
+            self.tile = max(1, MAX_ITEMS // self.slots)
+        else:                       # start small; _launch grows it towards the time budget
+            self.tile = max(1, (MIN_ITEMS >> 2) // self.slots)
+        self.adaptive = launch_seconds is not None and not tile
+        self.launches = 0
         n = self.slots * self.npix
         self.sums = cl.Buffer(self.ctx, mf.READ_WRITE, 16 * n)
         self.sums_sq = cl.Buffer(self.ctx, mf.READ_WRITE, 16 * n)
@@ -79,31 +110,87 @@ class Renderer:
         self.samples_done = 0
         self.seconds = 0.0
 
-    def _launch(self, sample_base: int, slots: int):
-        for first in range(0, self.npix, self.tile):
-            count = min(self.tile, self.npix - first)
-            self.kernel.set_args(*self.buffers, self.sums, self.sums_sq, self.invalid,
-                                 np.uint32(sample_base), np.int32(first), np.int32(count), np.int32(slots))
-            cl.enqueue_nd_range_kernel(self.queue, self.kernel, (count * slots,), None)
+    def data_hash(self) -> str:
+        """sha256 of everything the kernel reads except the seed: two renderers with equal hashes
+        (and equal seeds, features and kernel sources) compute the same samples."""
+        h = hashlib.sha256()
+        for name in self.ARG_ORDER:
+            a = np.array(self.packed.arrays[name])
+            if name == "params":
+                a["seed"] = 0
+            h.update(name.encode())
+            h.update(np.ascontiguousarray(a).tobytes())
+        return h.hexdigest()
 
-    def render(self, spp: int, progress=None, time_limit: float | None = None) -> RenderResult:
-        """Add `spp` samples per pixel (fewer if time_limit seconds pass first) and return the image
-        of everything accumulated so far."""
+    def _launch(self, sample_base: int, slots: int, accum):
+        """Samples sample_base .. sample_base + slots - 1 of every pixel, into slots 0 .. slots - 1
+        of the accumulators `accum`, in launches of `tile` pixels."""
+        first = 0
+        while first < self.npix:
+            count = min(self.tile, self.npix - first)
+            self.kernel.set_args(*self.buffers, *accum,
+                                 np.uint32(sample_base), np.int32(first), np.int32(count), np.int32(slots))
+            t0 = time.perf_counter()
+            event = cl.enqueue_nd_range_kernel(self.queue, self.kernel, (count * slots,), None)
+            self.launches += 1
+            if self.adaptive:
+                event.wait()
+                self._resize_tile(count * slots, time.perf_counter() - t0)
+            first += count
+
+    def _resize_tile(self, items: int, seconds: float):
+        """Next launch's pixel count: aim at half the budget (tiles differ in cost across the
+        image), grow at most 2x per launch, shrink at once. Launch sizes are powers of two work
+        items, so a driver that compiles per launch size (PoCL does) sees few sizes."""
+        rate = items / max(seconds, 1e-6)
+        want = max(1.0, 0.5 * self.launch_seconds * rate)
+        items_next = 1 << int(np.floor(np.log2(want)))
+        self.tile = int(np.clip(items_next // self.slots, 1, min(2 * self.tile, self.npix)))
+
+    def _pass(self, done: int, count: int):
+        """Add samples done .. done + count - 1 (all in one round of the slots) to every pixel."""
+        first_slot = done % self.slots
+        assert first_slot + count <= self.slots
+        if first_slot == 0:
+            self._launch(done, count, (self.sums, self.sums_sq, self.invalid))
+            return
+        # Slots first_slot.. of the accumulators: the kernel writes slots from 0, so those rows go
+        # through scratch buffers and back; the kernel does the same float operations on the same
+        # values as it would in place.
+        n = count * self.npix
+        mf = cl.mem_flags
+        rows = [(self.sums, 16), (self.sums_sq, 16), (self.invalid, 4)]
+        scratch = [cl.Buffer(self.ctx, mf.READ_WRITE, size * n) for _, size in rows]
+        for (buf, size), tmp in zip(rows, scratch):
+            cl.enqueue_copy(self.queue, tmp, buf, src_offset=size * first_slot * self.npix, byte_count=size * n)
+        self._launch(done, count, scratch)
+        for (buf, size), tmp in zip(rows, scratch):
+            cl.enqueue_copy(self.queue, buf, tmp, dst_offset=size * first_slot * self.npix, byte_count=size * n)
+
+    def render(self, spp: int, progress=None, time_limit: float | None = None, stop=None) -> RenderResult:
+        """Add `spp` samples per pixel and return the image of everything accumulated so far.
+
+        Ends early, between sample passes, when time_limit seconds have passed or `stop()` returns
+        true; `progress(n)` is called after each pass with the samples it added."""
         target = self.samples_done + spp
-        t0 = time.perf_counter()
+        t_start = time.perf_counter()
         while self.samples_done < target:
-            slots = min(self.slots, target - self.samples_done)
-            self._launch(self.samples_done, slots)
+            t0 = time.perf_counter()
+            count = min(self.slots - self.samples_done % self.slots, target - self.samples_done)
+            self._pass(self.samples_done, count)
             self.queue.finish()
-            self.samples_done += slots
+            self.samples_done += count
+            self.seconds += time.perf_counter() - t0
             if progress is not None:
-                progress(slots)
-            if time_limit is not None and time.perf_counter() - t0 >= time_limit:
+                progress(count)
+            if time_limit is not None and time.perf_counter() - t_start >= time_limit:
                 break
-        self.seconds += time.perf_counter() - t0
+            if stop is not None and stop():
+                break
         return self.result()
 
-    def result(self) -> RenderResult:
+    def state(self) -> dict:
+        """The accumulated state, raw: what a checkpoint stores to continue bit for bit."""
         n = self.slots * self.npix
         sums = np.empty((n, 4), np.float32)
         sums_sq = np.empty((n, 4), np.float32)
@@ -111,8 +198,32 @@ class Renderer:
         cl.enqueue_copy(self.queue, sums, self.sums)
         cl.enqueue_copy(self.queue, sums_sq, self.sums_sq)
         cl.enqueue_copy(self.queue, invalid, self.invalid)
-        s = sums.astype(np.float64).reshape(self.slots, self.npix, 4).sum(0)
-        ss = sums_sq.astype(np.float64).reshape(self.slots, self.npix, 4).sum(0)
+        self.queue.finish()
+        return {"sums": sums, "sums_sq": sums_sq, "invalid": invalid, "samples_done": self.samples_done,
+                "seconds": self.seconds, "slots": self.slots, "width": self.width, "height": self.height,
+                "seed": self.seed}
+
+    def restore(self, state: dict):
+        """Continue from state() of a renderer of the same scene, seed and image size."""
+        for key in ("slots", "width", "height", "seed"):
+            if int(state[key]) != getattr(self, key):
+                raise ValueError(f"state has {key} {int(state[key])}, this renderer {getattr(self, key)}")
+        n = self.slots * self.npix
+        arrays = [(self.sums, "sums", np.float32, (n, 4)), (self.sums_sq, "sums_sq", np.float32, (n, 4)),
+                  (self.invalid, "invalid", np.uint32, (n,))]
+        for buf, key, dtype, shape in arrays:
+            a = np.ascontiguousarray(state[key])
+            if a.dtype != dtype or a.shape != shape:
+                raise ValueError(f"state {key}: {a.dtype}{a.shape}, expected {np.dtype(dtype)}{shape}")
+            cl.enqueue_copy(self.queue, buf, a)
+        self.queue.finish()
+        self.samples_done = int(state["samples_done"])
+        self.seconds = float(state["seconds"])
+
+    def result(self) -> RenderResult:
+        st = self.state()
+        s = st["sums"].astype(np.float64).reshape(self.slots, self.npix, 4).sum(0)
+        ss = st["sums_sq"].astype(np.float64).reshape(self.slots, self.npix, 4).sum(0)
         count = s[:, 3:4]
         safe = np.maximum(count, 1)
         mean = s[:, :3] / safe
@@ -121,7 +232,7 @@ class Renderer:
         shape = (self.height, self.width, 3)
         return RenderResult(
             image=mean.reshape(shape).astype(np.float32), variance=var_mean.reshape(shape).astype(np.float32),
-            spp=self.samples_done, invalid=int(invalid.sum()), seconds=self.seconds,
+            spp=self.samples_done, invalid=int(st["invalid"].sum()), seconds=self.seconds,
             device=f"{self.device.key} {self.device.name}", features=self.packed.features,
             build_seconds=self.build_seconds,
             stats={"triangles": self.packed.triangle_count, "spheres": self.packed.sphere_count,

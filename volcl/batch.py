@@ -1,0 +1,298 @@
+"""`volcl render`: one scene or a batch, built to be trusted with long jobs.
+
+- Outputs are named after the scenes (cbox.xml -> cbox.exr, in --output-dir or the working
+  folder); scenes that share a name get their folders in the output name (x/cbox.xml and
+  y/cbox.xml -> x_cbox.exr and y_cbox.exr), so no output overwrites another.
+- A scene that fails is reported and the batch goes on; a table at the end says what happened to
+  every scene, and the exit status says whether anything failed.
+- SIGINT (Ctrl-C) or SIGTERM: the pass under way finishes, the image rendered so far is written
+  (with its sample count in the metadata) beside a checkpoint, the batch stops, and volcl exits
+  with 128 + the signal number (130, 143). A second signal stops at once without writing.
+- Every --checkpoint-every minutes the accumulated state is saved (volcl/checkpoint.py);
+  --resume continues from it, bit-identical to a render that never stopped.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import time
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+
+from . import __version__
+from . import checkpoint
+from .errors import VolclError
+
+PROGRESS_LINE_SECONDS = 10.0        # progress lines when stderr is not a terminal (logs)
+EXIT_FAILED = 1
+
+
+@dataclass
+class Job:
+    scene: str
+    output: Path
+    status: str = "not rendered"
+    spp: int | None = None
+    seconds: float | None = None
+    error: str = ""
+
+    @property
+    def failed(self) -> bool:
+        return self.status == "FAILED"
+
+
+def output_paths(scenes, output=None, output_dir=None, suffix=".exr") -> list[Path]:
+    """The output file of each scene: -o for a single scene, else named after the scene file in
+    output_dir (or the working folder). Scenes sharing a file name are told apart by their folders
+    below the folder they have in common."""
+    if output is not None:
+        if len(scenes) > 1:
+            raise VolclError("-o names one output file; with several scenes outputs are named after the "
+                             "scenes (use --output-dir DIR to put them elsewhere)")
+        if output_dir is not None:
+            raise VolclError("-o and --output-dir exclude each other; give -o a path with its folder")
+        return [Path(output)]
+    folder = Path(output_dir) if output_dir is not None else Path(".")
+    resolved = [Path(s).resolve() for s in scenes]
+    seen = {}
+    for given, p in zip(scenes, resolved):
+        if p in seen:
+            raise VolclError(f"scene {given} is given twice (also as {seen[p]})")
+        seen[p] = given
+    by_stem: dict[str, list[Path]] = {}
+    for p in resolved:
+        by_stem.setdefault(p.stem, []).append(p)
+    names = []
+    for p in resolved:
+        group = by_stem[p.stem]
+        if len(group) == 1:
+            names.append(p.stem)
+        else:
+            common = Path(os.path.commonpath([q.parent for q in group]))
+            names.append("_".join(p.with_suffix("").relative_to(common).parts))
+    outs = [folder / (n + suffix) for n in names]
+    taken = {}
+    for given, out in zip(scenes, outs):
+        if out in taken:
+            raise VolclError(f"scenes {taken[out]} and {given} would both write {out}; render them "
+                             "in separate runs with different --output-dir")
+        taken[out] = given
+    return outs
+
+
+class Interrupted(KeyboardInterrupt):
+    """A second SIGINT/SIGTERM: stop now, write nothing more (volcl exits with 128 + signum)."""
+
+    def __init__(self, signum):
+        super().__init__(signum)
+        self.signum = signum
+
+
+class StopRequest:
+    """While active, SIGINT and SIGTERM ask the render to stop after the current pass (`requested`
+    turns true); a second signal raises Interrupted at once."""
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self):
+        self.signum = None
+        self._old = {}
+
+    @property
+    def requested(self) -> bool:
+        return self.signum is not None
+
+    @property
+    def exit_status(self) -> int:
+        return 128 + self.signum
+
+    def _handle(self, signum, frame):
+        if self.signum is not None:
+            raise Interrupted(signum)
+        self.signum = signum
+        print(f"\nvolcl: {signal.Signals(signum).name} received: stopping after the current pass "
+              "(send it again to stop at once without writing)", file=sys.stderr, flush=True)
+
+    def __enter__(self):
+        for s in self.SIGNALS:
+            self._old[s] = signal.signal(s, self._handle)
+        return self
+
+    def __exit__(self, *exc):
+        for s, old in self._old.items():
+            signal.signal(s, old)
+        return False
+
+
+class Progress:
+    """A tqdm bar on a terminal; otherwise (a log file, a pipe) a line after the first pass and
+    then every PROGRESS_LINE_SECONDS."""
+
+    def __init__(self, name, done, total, quiet):
+        self.name, self.done, self.total, self.quiet = name, done, total, quiet
+        self.bar = None
+        self.t0 = time.monotonic()
+        self.last_line = None
+        if not quiet and sys.stderr.isatty():
+            from tqdm import tqdm
+            self.bar = tqdm(total=total, initial=done, desc=name, unit="spp", leave=False, file=sys.stderr)
+
+    def update(self, n):
+        self.done += n
+        if self.bar is not None:
+            self.bar.update(n)
+        elif not self.quiet:
+            now = time.monotonic()
+            if self.last_line is None or now - self.last_line >= PROGRESS_LINE_SECONDS:
+                self.last_line = now
+                print(f"volcl: {self.name}: {self.done}/{self.total} spp, {now - self.t0:.1f} s",
+                      file=sys.stderr, flush=True)
+
+    def close(self):
+        if self.bar is not None:
+            self.bar.close()
+
+
+def _already_rendered(out: Path, scene_path, defines: dict, spp: int, scene, seed) -> bool:
+    """Whether `out` is a finished render of this scene file, these -D overrides, size and seed
+    with at least `spp` samples (what --resume leaves alone)."""
+    from .image import read_image
+    if not out.is_file() or out.suffix.lower() != ".exr":
+        return False
+    try:
+        pixels, attrs = read_image(out)
+    except VolclError:
+        return False
+    return (attrs.get("volcl:complete") == 1 and attrs.get("volcl:spp", 0) >= spp
+            and attrs.get("volcl:scene_sha256") == checkpoint.file_sha256(scene_path)
+            and attrs.get("volcl:defines") == checkpoint.defines_key(defines)
+            and pixels.shape[:2] == (scene.camera.height, scene.camera.width)
+            and (seed is None or attrs.get("volcl:seed") == seed & 0xFFFFFFFF))
+
+
+def render_job(job: Job, opts, device, stop: StopRequest, load_scene, defines, features):
+    """Render one scene into job.output, updating job. Raises VolclError for what a user can fix."""
+    from .image import check_writable, write_image
+    from .render import Renderer
+    out = check_writable(job.output)
+    scene = load_scene(job.scene)
+    spp = opts.spp or scene.spp
+    ckpt = checkpoint.path_for(out)
+    state = meta = None
+    if opts.resume:
+        if ckpt.is_file():
+            state, meta = checkpoint.load(ckpt)
+        elif _already_rendered(out, job.scene, defines, spp, scene, opts.seed):
+            job.status, job.spp = "done earlier, kept", spp
+            print(f"{out}: already rendered with {spp} spp or more; kept", flush=True)
+            return
+    seed = opts.seed if opts.seed is not None else (meta["seed"] if meta else None)
+    renderer = Renderer(scene, device=device, features=features, seed=seed)
+    ident = checkpoint.identity(renderer, job.scene, defines)
+    if state is not None:
+        checkpoint.check(ckpt, meta, ident, renderer.seed)
+        renderer.restore(state)
+        print(f"volcl: {job.scene}: resuming from {ckpt} at {renderer.samples_done} spp", file=sys.stderr)
+    elif ckpt.is_file():
+        print(f"volcl: warning: {ckpt} exists and is ignored (--resume continues from it); it will be "
+              "replaced", file=sys.stderr)
+    if opts.verbose:
+        build = (f"kernel build {renderer.build_seconds:.2f} s (the first of this kernel version and feature set "
+                 f"on this machine)" if renderer.build_was_cold else
+                 f"kernel build {renderer.build_seconds:.2f} s from the caches (the first build here took "
+                 f"{renderer.cold_build_seconds:.2f} s)")
+        print(f"{job.scene}: {renderer.packed.triangle_count} triangles, {renderer.packed.sphere_count} spheres, "
+              f"BVH {renderer.packed.bvh_seconds:.2f} s, {build}", file=sys.stderr)
+    if stop.requested:          # a signal came while the scene loaded or the kernel built
+        return
+    resumed_at = renderer.samples_done
+    interval = opts.checkpoint_every * 60.0 if opts.checkpoint_every else None
+    extra = {"spp_requested": spp}
+    last_save = time.monotonic()
+
+    def after_pass():
+        nonlocal last_save
+        if interval is not None and time.monotonic() - last_save >= interval:
+            checkpoint.save(ckpt, renderer, ident, extra)
+            last_save = time.monotonic()
+        return stop.requested
+
+    progress = Progress(Path(job.scene).name, renderer.samples_done, spp, opts.quiet)
+    try:
+        result = renderer.render(max(spp - renderer.samples_done, 0), progress=progress.update, stop=after_pass)
+    finally:
+        progress.close()
+    complete = result.spp >= spp
+    if interval is not None and (not complete or opts.keep_checkpoint):
+        checkpoint.save(ckpt, renderer, ident, extra)
+    meta_out = {"scene": str(Path(job.scene).resolve()), "scene_sha256": ident["scene_sha256"],
+                "defines": ident["defines"], "spp": result.spp, "spp_requested": spp, "complete": int(complete),
+                "seed": renderer.seed, "device": result.device, "features": result.stats["features"],
+                "kernel_sha256": ident["kernel_sha256"], "render_seconds": round(result.seconds, 3),
+                "version": __version__, "invalid_samples": result.invalid}
+    layers = {"variance": result.variance} if out.suffix.lower() == ".exr" else None
+    write_image(out, result.image, meta_out, layers)
+    if complete and not opts.keep_checkpoint and ckpt.is_file():
+        ckpt.unlink()
+    job.spp, job.seconds = result.spp, result.seconds
+    if complete:
+        job.status = f"ok (resumed at {resumed_at} spp)" if resumed_at else "ok"
+    else:
+        job.status = f"interrupted ({result.spp} of {spp} spp)"
+        kept = f" and {ckpt} (continue with --resume)" if interval is not None else ""
+        print(f"volcl: interrupted after {result.spp} spp; wrote {out}{kept}", file=sys.stderr, flush=True)
+    print(f"{out}: {result.spp} spp in {result.seconds:.2f} s, {result.samples_per_second / 1e6:.2f} M samples/s, "
+          f"invalid samples {result.invalid}, device {result.device}, features {result.stats['features']}",
+          flush=True)
+
+
+def print_table(jobs: list[Job], file=sys.stdout):
+    rows = [("scene", "output", "spp", "seconds", "status")]
+    for j in jobs:
+        rows.append((j.scene, str(j.output), "-" if j.spp is None else str(j.spp),
+                     "-" if j.seconds is None else f"{j.seconds:.2f}", j.status))
+    widths = [max(len(r[i]) for r in rows) for i in range(4)]
+    for r in rows:
+        print("  ".join(c.ljust(w) if i != 2 and i != 3 else c.rjust(w)
+                        for i, (c, w) in enumerate(zip(r[:4], widths))) + "  " + r[4], file=file)
+    for j in jobs:
+        if j.failed:
+            print(f"FAILED {j.scene}: {j.error}", file=file)
+
+
+def run(opts, device_selector, load_scene, defines, features) -> int:
+    """Render every scene of opts.scenes; the exit status: 0, EXIT_FAILED if a scene failed, 128 +
+    the signal number if interrupted."""
+    from . import device as devmod
+    outs = output_paths(opts.scenes, opts.output, opts.output_dir)
+    if opts.output_dir is not None:
+        Path(opts.output_dir).mkdir(parents=True, exist_ok=True)
+    jobs = [Job(s, o) for s, o in zip(opts.scenes, outs)]
+    single = len(jobs) == 1
+    with StopRequest() as stop:
+        device = devmod.choose(device_selector)
+        for job in jobs:
+            if stop.requested:
+                break
+            try:
+                render_job(job, opts, device, stop, load_scene, defines, features)
+            except Exception as exc:
+                if single:
+                    raise
+                job.status = "FAILED"
+                job.error = str(exc) if isinstance(exc, VolclError) else f"{type(exc).__name__}: {exc}"
+                print(f"volcl: error: {job.scene}: {job.error}", file=sys.stderr, flush=True)
+                if opts.verbose and not isinstance(exc, VolclError):
+                    traceback.print_exc()
+    if not single:
+        done = sum(j.status.startswith(("ok", "done earlier")) for j in jobs)
+        print(f"\n{done} of {len(jobs)} scenes rendered")
+        print_table(jobs)
+    if stop.requested:
+        left = [j.scene for j in jobs if j.status == "not rendered"]
+        if left:
+            print(f"volcl: interrupted; not rendered: {', '.join(left)}", file=sys.stderr)
+        return stop.exit_status
+    return EXIT_FAILED if any(j.failed for j in jobs) else 0
