@@ -396,3 +396,11 @@ def test_shipped_scene_has_no_invalid_samples(device, path):
     assert r.invalid == 0, f"{path.name}: {r.invalid} invalid samples"
     assert np.isfinite(r.image).all() and np.isfinite(r.variance).all()
     assert r.image.mean() > 0, f"{path.name} rendered black"
+
+
+def test_invalid_samples_are_counted_and_left_out(device):
+    """Walls emitting near the float32 maximum: path sums overflow to infinity. Such samples are
+    counted per pixel on the device (RenderResult.invalid) and kept out of the image's sums."""
+    r = render(furnace(0.9, radiance=3e38), spp=16, device=device)
+    assert 0 < r.invalid <= 8 * 8 * 16
+    assert np.isfinite(r.image).all() and np.isfinite(r.variance).all()
