@@ -161,6 +161,18 @@ def test_thick_half_space_reflects_chandrasekhar_albedo(device, sigma, size):
     assert_mean_matches(r, expected, blocks=1, what=f"half-space albedo, sigma_t={sigma}")
 
 
+def test_albedo_one_medium_of_sigma_1e6_in_a_micro_furnace(device):
+    """sigma_t = 1e6 and albedo 1 in a furnace 2e-6 across (optical size 2, so light gets out):
+    L = 1 / (1 - a), as in the unit furnace; offsets and tiny distances keep to the scale."""
+    a = 0.5
+    v, f = box_mesh(1e-6, inward=True)
+    walls = Shape("mesh", diffuse(a), vertices=v, faces=f, emitter_radiance=rgb(1.0))
+    cam = camera(8, 8, fov=90, medium=medium(1e6, 1.0, g=0.5))
+    cam.near_clip = 1e-9
+    r = render(scene([walls], cam=cam), spp=512, device=device)
+    assert_mean_matches(r, 1 / (1 - a), what="micro furnace")
+
+
 def test_thick_albedo_one_medium_ends_in_bounded_time(device):
     """A furnace filled with an albedo-1 medium of sigma_t = 1e6: paths never reach a wall (that
     takes ~1e12 scattering events), so only Russian roulette (survival capped at 0.95) and the step
