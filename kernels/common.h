@@ -48,15 +48,35 @@ inline float power_heuristic(float pdf_a, float pdf_b) {
 }
 
 /* Ray origin offset off a surface, along the geometric normal towards the side `d` leaves on.
- * The offset scales with the magnitude of the position because float32 spacing does (Mitsuba's
+ * The offset scales with the magnitude of the coordinates because float32 spacing does (Mitsuba's
  * approach); a fixed epsilon either self-intersects far from the origin or leaks through thin walls
- * near it. Used for every ray that leaves a surface: continuation rays and shadow rays alike. */
-inline float3 offset_origin(float3 p, float3 ng, float3 d) {
-    float mag = fmax(fmax(fabs(p.x), fabs(p.y)), fmax(fabs(p.z), 1.0f));
+ * near it. Used for every ray that leaves a surface: continuation rays and shadow rays alike.
+ * `mag` is the magnitude of the coordinates p was computed from (SurfacePoint.mag: a triangle's
+ * vertices, a sphere's centre plus radius), which bounds the rounding error of p even where p
+ * itself is near zero. Hazards: a floor of 1 (Mitsuba's 1 + |p|) broke both ends of the scale.
+ * Large triangles hit near the origin (a slab 800 units wide) got an offset smaller than the
+ * rounding of p, which then sat on either side of the surface at random; in a scene 1e-4 units
+ * across, 1e-5 skipped a tenth of every medium entered, and at 1e-6 whole objects. Relative to mag
+ * the offset is the same fraction of the geometry at every scale. */
+inline float3 offset_origin(float3 p, float mag, float3 ng, float3 d) {
+    mag = fmax(mag, fmax(fmax(fabs(p.x), fabs(p.y)), fabs(p.z)));
     float eps = mag * 1e-5f;
     /* the same side rule as medium_after (> 0: the side ng points to), so a direction exactly in the
      * tangent plane starts on the side whose medium it is given */
     return p + (dot(d, ng) > 0.0f ? eps : -eps) * ng;
+}
+
+/* How far back along d the plane of the surface at p (normal ng) lies from the offset origin o:
+ * where a medium segment that starts at that surface begins, measured on the traced ray.
+ * Hazard: the offset puts o at depth eps below the surface, and sampling a medium from o skips
+ * sigma_t * eps of optical depth (ten mean free paths at sigma_t = 1e6 in a unit scene). Going
+ * back by eps / cos instead of eps * cos (the offset's component along d) restores the depth of
+ * every point on the traced ray: depth = t * cos, as from the surface point itself. Points are
+ * not taken on the line through p, which can end beyond the boundary the traced ray stops at.
+ * Grazing rays go back at most 16 offsets, keeping the virtual entry point on the tangent plane
+ * within a second-order distance of a curved surface (their depth error stays below eps). */
+inline float offset_back(float3 o, float3 p, float3 ng, float3 d) {
+    return fabs(dot(o - p, ng)) / fmax(fabs(dot(d, ng)), 1.0f / 16.0f);
 }
 
 #endif

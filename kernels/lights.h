@@ -76,7 +76,9 @@ inline bool light_sample(const SceneData *sc, float3 ref, float u_pick, float2 u
         ls->wi = v / ls->dist;
         ls->value = light_area_emission(l, ns, -ls->wi);
         float cos_l = fabs(dot(ng, ls->wi));
-        if (cos_l <= 0.0f) return false;
+        /* written to be false for NaN too: a sliver whose float32 cross product rounds to zero
+         * (the host computes areas in float64, from the float32 corners) has a NaN normal here */
+        if (!(cos_l > 0.0f)) return false;
         ls->pdf = choice * d2 / (cos_l * l->area);
         return true;
     }

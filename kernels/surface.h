@@ -10,6 +10,7 @@ typedef struct {
     float3 ng;
     float3 ns;
     int shape;
+    float mag;      /* magnitude of the coordinates p was computed from: scales offset_origin */
 } SurfacePoint;
 
 __attribute__((always_inline))
@@ -25,6 +26,7 @@ inline SurfacePoint surface_point(const SceneData *sc, const Hit *h, float3 o, f
         s.ng = sp->flip ? -n : n;
         s.ns = s.ng;
         s.shape = sp->shape;
+        s.mag = max_component(fabs(c)) + sp->radius;
         return s;
     }
 #endif
@@ -42,7 +44,11 @@ inline SurfacePoint surface_point(const SceneData *sc, const Hit *h, float3 o, f
     b1 *= inv_sum;
     b2 *= inv_sum;
     s.p = b0 * p0 + b1 * p1 + b2 * p2;
-    s.ng = normalize(cross(p1 - p0, p2 - p0));
+    /* Hazard: a sliver the watertight test still hits (its det is taken in the ray's sheared frame)
+     * can have a cross product that rounds to zero, and normalizing it gives NaN or zero; such a hit
+     * faces the ray (its own winding is lost to rounding) instead of poisoning the path */
+    float3 ng = normalize(cross(p1 - p0, p2 - p0));
+    s.ng = dot(ng, ng) > 0.5f ? ng : -d;    /* false for NaN and for a zero vector */
     s.ns = s.ng;
 #if VOLCL_HAS_SHADING_NORMALS
     if (tri->normals >= 0) {
@@ -53,6 +59,7 @@ inline SurfacePoint surface_point(const SceneData *sc, const Hit *h, float3 o, f
     }
 #endif
     s.shape = tri->shape;
+    s.mag = max_component(fmax(fabs(p0), fmax(fabs(p1), fabs(p2))));
     return s;
 }
 

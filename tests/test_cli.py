@@ -117,3 +117,33 @@ def test_define_that_the_scene_never_reads_is_an_error(tmp_path):
     r = volcl("render", "scenes/cbox.xml", "-o", tmp_path / "x.png", "-D", "sppp=4")
     assert r.returncode == 2
     assert "-D sppp" in r.stderr and "spp" in r.stderr
+
+
+OVERFLOWING = """<scene version="3.0.0">
+    <sensor type="perspective"><float name="fov" value="90"/>
+        <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="6"/></film>
+        <sampler type="independent"><integer name="sample_count" value="4"/></sampler>
+    </sensor>
+    <!-- a furnace whose walls emit near the float32 maximum: every path's sum overflows to inf -->
+    <shape type="cube">
+        <boolean name="flip_normals" value="true"/>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0.9"/></bsdf>
+        <emitter type="area"><rgb name="radiance" value="3e38"/></emitter>
+    </shape>
+</scene>
+"""
+
+
+def test_invalid_samples_are_reported_in_summary_and_metadata(tmp_path):
+    """Samples that come out NaN or infinite are counted on the device, left out of the image, and
+    reported: the summary line and the EXR's volcl:invalid_samples carry the same count."""
+    scene = tmp_path / "overflow.xml"
+    scene.write_text(OVERFLOWING)
+    out = tmp_path / "overflow.exr"
+    r = volcl("render", scene, "-o", out, "-q")
+    assert r.returncode == 0, r.stderr
+    img, attrs = read_image(out)
+    count = attrs["volcl:invalid_samples"]
+    assert 0 < count <= 8 * 6 * 4
+    assert f"invalid samples {count}," in r.stdout
+    assert np.isfinite(img).all(), "invalid samples must be left out of the image"

@@ -164,9 +164,33 @@ MITSUBA_CASES = {
                          "<color>", "<rgb>"),
     "fov_axis without fov": ('<sensor type="perspective">\n<string name="fov_axis" value="y"/>'
                              '</sensor>', 3, "'fov'"),
-    "sphere beyond float range": ('<shape type="sphere"><float name="radius" value="1e308"/>\n'
+    "sphere beyond float range": ('<shape type="sphere"><float name="radius" value="1e38"/>\n'
                                   '<transform name="to_world"><scale value="10"/></transform>'
                                   '</shape>', 3, "floating-point range"),
+    "float beyond float32": ('<bsdf type="diffuse">\n<float name="reflectance" value="1e39"/></bsdf>',
+                             3, "'1e39'", "single-precision"),
+    "nan coefficient": ('<medium type="homogeneous">\n<rgb name="sigma_t" value="1, nan, 1"/></medium>',
+                        3, "'nan'", "not a finite number"),
+    "infinite albedo": ('<medium type="homogeneous">\n<float name="albedo" value="-inf"/></medium>',
+                        3, "'-inf'", "not a finite number"),
+    "negative scalar sigma_t": ('<medium type="homogeneous">\n<float name="sigma_t" value="-0.5"/>'
+                                '</medium>', 3, "'sigma_t' must be >= 0", "-0.5"),
+    "sigma_t times scale overflows": ('<medium type="homogeneous">\n<float name="sigma_t" value="1e38"/>'
+                                      '<float name="scale" value="10"/></medium>', 2, "sigma_t (times scale)",
+                                      "1e+39", "single-precision"),
+    "emission overflows": ('<medium type="homogeneous">\n<float name="sigma_t" value="1e30"/>'
+                           '<rgb name="volcl_radiance" value="1e10"/></medium>', 2, "emission", "1e+40"),
+    "g of minus one": ('<medium type="homogeneous"><phase type="hg">\n<float name="g" '
+                       'value="-1"/></phase></medium>', 3, "'g' = -1.0", "-1 < g < 1"),
+    "g above one": ('<medium type="homogeneous"><phase type="hg">\n<float name="g" '
+                    'value="1.5"/></phase></medium>', 3, "1.5", "-1 < g < 1"),
+    "rectangle with interior medium": ('<shape type="rectangle">\n<medium type="homogeneous" '
+                                       'name="interior"/></shape>', 2, "interior medium", "not closed",
+                                       "4 edges border only one triangle", "exterior"),
+    "disk with interior medium": ('<medium type="homogeneous" id="fog"/>\n<shape type="disk" id="lid">'
+                                  '<ref id="fog" name="interior"/></shape>', 3, "id 'lid'", "not closed",
+                                  "512 edges"),
+
     "scaled camera": ('<sensor type="perspective">\n<transform name="to_world">'
                       '<scale value="2"/></transform></sensor>', 3, "not scale"),
     "nested scene": ('<scene version="3.0.0"/>', 2, "<scene>"),
@@ -336,3 +360,116 @@ def test_albedo_grid_above_one(tmp_path):
             '<string name="filename" value="albedo.vol"/></volume></medium>')
     expect_error(tmp_path, M.format(body), 3, "'albedo' values must be in [0, 1]", "albedo.vol")
 
+
+# -- shapes that cannot do what their emitter or medium needs ------------------------------------
+
+CLOSED_TETRA = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
+
+
+@pytest.mark.parametrize("mesh_text, fragments", [
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", ["not closed", "3 edges border only one triangle"]),
+    (CLOSED_TETRA.replace("f 2 3 4\n", ""), ["not closed", "3 edges border only one triangle"]),
+    (CLOSED_TETRA + "f 2 3 4\n", ["not closed", "shared by more than two triangles"]),
+    (CLOSED_TETRA.replace("f 2 3 4", "f 2 4 3"), ["not wound consistently"]),
+    ("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", ["all of its triangles have zero area"]),
+], ids=["one triangle", "hole", "non-manifold", "inconsistent winding", "flat"])
+def test_interior_medium_needs_a_closed_mesh(tmp_path, mesh_text, fragments):
+    (tmp_path / "part.obj").write_text(mesh_text)
+    body = ('<shape type="obj" id="vessel">\n<string name="filename" value="part.obj"/>'
+            '<medium type="homogeneous" name="interior"/></shape>')
+    expect_error(tmp_path, M.format(body), 2, "id 'vessel'", "mesh 'part.obj'", "interior medium",
+                 *fragments)
+
+
+def test_closed_meshes_and_exterior_media_are_accepted(tmp_path):
+    """A closed mesh (also with degenerate triangles and split corners, as OBJ groups give) may hold
+    a medium; an open surface may have one outside it."""
+    # a degenerate extra triangle, and a normal per face: the loader splits every corner
+    faces = [line.split()[1:] for line in CLOSED_TETRA.splitlines() if line.startswith("f")]
+    with_normals = "".join(line + "\n" for line in CLOSED_TETRA.splitlines() if line.startswith("v"))
+    with_normals += "vn 0 0 -1\nvn 0 -1 0\nvn -1 0 0\nvn 1 1 1\nv 0.5 0 0\n"
+    with_normals += "".join(f"f {a}//{i + 1} {b}//{i + 1} {c}//{i + 1}\n" for i, (a, b, c) in enumerate(faces))
+    with_normals += "f 1//1 2//1 5//1\n"
+    (tmp_path / "tetra.obj").write_text(with_normals)
+    body = ('<medium type="homogeneous" id="fog"/>'
+            '<shape type="obj"><string name="filename" value="tetra.obj"/><ref id="fog" name="interior"/></shape>'
+            '<shape type="cube"><ref id="fog" name="interior"/></shape>'
+            '<shape type="sphere"><ref id="fog" name="interior"/></shape>'
+            '<shape type="rectangle"><ref id="fog" name="exterior"/></shape>')
+    path = tmp_path / "ok.xml"
+    path.write_text(M.format(body))
+    scene = load(path)
+    assert sum(s.interior is not None for s in scene.shapes) == 3
+    assert len(scene.shapes[0].vertices) > 5        # the corners were split
+
+
+def test_zero_area_emitter(tmp_path):
+    (tmp_path / "flat.obj").write_text("v 0 0 0\nv 1 0 0\nv 2 0 0\nv 0 1 0\nf 1 2 3\nf 4 4 1\n")
+    body = ('<shape type="obj" id="lamp">\n<string name="filename" value="flat.obj"/>'
+            '<emitter type="area"/></shape>')
+    expect_error(tmp_path, M.format(body), 2, "id 'lamp'", "mesh 'flat.obj'", "area emitter",
+                 "zero total area", "all 2 triangles")
+
+
+def test_emitter_collapsing_in_single_precision_is_zero_area(tmp_path):
+    (tmp_path / "sliver.obj").write_text("v 1 1 1\nv 1.00000000001 1 1\nv 1 1.00000000001 1\nf 1 2 3\n")
+    body = ('<shape type="obj">\n<string name="filename" value="sliver.obj"/>'
+            '<emitter type="area"/></shape>')
+    expect_error(tmp_path, M.format(body), 2, "mesh 'sliver.obj'", "zero total area", "single precision")
+
+
+def test_nori_emitter_on_zero_area_mesh(tmp_path):
+    (tmp_path / "flat.obj").write_text("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n")
+    body = (NORI_OK + '<mesh type="obj">\n<string name="filename" value="flat.obj"/>'
+            '<emitter type="area"><color name="radiance" value="1"/></emitter></mesh>')
+    expect_error(tmp_path, N.format(body), 2, "mesh 'flat.obj'", "zero total area")
+
+
+def test_unreadable_scene_path_is_a_clear_error(tmp_path):
+    (tmp_path / "dir.xml").mkdir()
+    with pytest.raises(VolclError, match="not a regular file"):
+        load(tmp_path / "dir.xml")
+
+
+def test_mesh_path_that_is_a_directory(tmp_path):
+    (tmp_path / "dir.obj").mkdir()
+    body = '<shape type="obj">\n<string name="filename" value="dir.obj"/></shape>'
+    expect_error(tmp_path, M.format(body), 3, "dir.obj", "not a regular file")
+
+
+# -- untrusted XML reaches nothing but the files it names ----------------------------------------
+
+def test_xinclude_is_not_processed(tmp_path):
+    expect_error(tmp_path, M.format('<xi:include href="/etc/passwd" parse="text"/>'), 2, "<xi:include>",
+                 "not allowed")
+    text = ('<scene version="3.0.0" xmlns:xi="http://www.w3.org/2001/XInclude">\n'
+            '<xi:include href="/etc/passwd" parse="text"/></scene>')
+    expect_error(tmp_path, text, 1, "unknown attribute 'xmlns:xi'")
+
+
+def test_external_dtd_is_rejected(tmp_path):
+    text = '<?xml version="1.0"?>\n<!DOCTYPE scene SYSTEM "http://example.com/evil.dtd">\n<scene version="3.0.0"/>'
+    expect_error(tmp_path, text, 2, "DOCTYPE")
+
+
+def test_parameter_entity_is_rejected(tmp_path):
+    text = ('<?xml version="1.0"?>\n<!DOCTYPE s [<!ENTITY % p SYSTEM "file:///etc/passwd"> %p;]>\n'
+            '<scene version="3.0.0"/>')
+    expect_error(tmp_path, text, 2, "DOCTYPE")
+
+
+def test_loader_opens_only_the_files_the_scene_names(tmp_path, monkeypatch):
+    import builtins
+    (tmp_path / "tetra.obj").write_text(CLOSED_TETRA)
+    path = tmp_path / "scene.xml"
+    path.write_text(M.format('<shape type="obj"><string name="filename" value="tetra.obj"/></shape>'))
+    opened = []
+    real_open = builtins.open
+
+    def spy(file, *args, **kwargs):
+        opened.append(str(file))
+        return real_open(file, *args, **kwargs)
+    monkeypatch.setattr(builtins, "open", spy)
+    load(path)
+    monkeypatch.undo()
+    assert set(opened) == {str(path), str(tmp_path / "tetra.obj")}, opened

@@ -141,6 +141,55 @@ def _validated(mesh: TriangleMesh, path: str) -> TriangleMesh:
     return TriangleMesh(v, f, n)
 
 
+def triangle_areas32(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Triangle areas of the mesh as the kernels see it: corners rounded to float32 (where slivers
+    can collapse to nothing), the area itself computed in float64."""
+    v = np.asarray(vertices, dtype=np.float32).astype(np.float64)[faces]
+    return 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+
+
+def closure_problem(vertices: np.ndarray, faces: np.ndarray) -> Optional[str]:
+    """Why the mesh does not enclose a volume the way a medium boundary must, or None if it does.
+
+    The kernels decide inside and outside by the side a ray crosses each triangle from, so a medium
+    needs a closed (watertight: every edge shared by exactly two triangles), consistently wound
+    surface around it; a gap lets paths out of the medium, or into it without a crossing. Corners
+    count as shared only when their float32 coordinates are equal, as they must be for the
+    watertight intersection test; zero-area triangles are left out (rays never hit them).
+    """
+    import trimesh
+
+    v32 = np.asarray(vertices, dtype=np.float32)
+    unique, inverse = np.unique(v32, axis=0, return_inverse=True)
+    f = inverse.reshape(-1)[np.asarray(faces)].reshape(-1, 3)
+    f = f[triangle_areas32(unique, f) > 0]
+    if len(f) == 0:
+        return "all of its triangles have zero area"
+    mesh = trimesh.Trimesh(unique.astype(np.float64), f, process=False, validate=False)
+    if not mesh.is_watertight:
+        edges = np.sort(mesh.edges, axis=1)
+        _, first, counts = np.unique(edges, axis=0, return_index=True, return_counts=True)
+        open_edges, shared = int((counts == 1).sum()), int((counts > 2).sum())
+        parts = []
+        if open_edges:
+            a, b = edges[first[np.argmax(counts == 1)]]
+            parts.append(f"{open_edges} edges border only one triangle (a hole or an open rim, e.g. "
+                         f"the edge from {_point(unique[a])} to {_point(unique[b])})")
+        if shared:
+            a, b = edges[first[np.argmax(counts > 2)]]
+            parts.append(f"{shared} edges are shared by more than two triangles (non-manifold, e.g. "
+                         f"the edge from {_point(unique[a])} to {_point(unique[b])})")
+        return "it is not closed: " + "; ".join(parts)
+    if not mesh.is_winding_consistent:
+        return ("its triangles are not wound consistently (some face normals point inwards, some "
+                "outwards), so inside and outside are undefined")
+    return None
+
+
+def _point(p) -> str:
+    return "(" + ", ".join(f"{float(x):.6g}" for x in p) + ")"
+
+
 def rectangle() -> TriangleMesh:
     """[-1, 1]^2 at z = 0; the winding makes the geometric normal +z."""
     v = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], dtype=np.float64)

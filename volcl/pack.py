@@ -13,6 +13,7 @@ import numpy as np
 from . import layout
 from .bvh import build_bvh
 from .features import detect
+from .mesh import triangle_areas32
 from .scene.model import Camera, Filter, Scene
 
 FILTER_TABLE_SIZE = 4097
@@ -178,8 +179,9 @@ def pack(scene: Scene, features: dict | None = None, max_leaf: int = 4) -> Packe
             rec["sphere"] = sphere_of_shape[id(s)]
             rec["area"] = 4 * math.pi * s.radius ** 2
         else:
-            v = s.vertices[s.faces]
-            areas = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+            # areas of the float32 triangles the kernel samples: a sliver that collapses in float32
+            # must not be picked (kernels/lights.h)
+            areas = triangle_areas32(s.vertices, s.faces)
             keep = np.nonzero(areas > 0)[0]
             total = areas[keep].sum()
             rec["area"] = total

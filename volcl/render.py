@@ -69,6 +69,10 @@ class Renderer:
         self.scene = scene
         self.device = device or devmod.choose()
         self.packed = pack(scene, features)
+        # a scene too large for the device is the user's to fix: say so before uploading anything
+        # (accumulators: sums, sums_sq, invalid for at least MIN_ITEMS slots, see below)
+        devmod.check_fits(self.device, {name: self.packed.arrays[name].nbytes for name in self.ARG_ORDER},
+                          accumulator_bytes=36 * max(scene.camera.width * scene.camera.height, MIN_ITEMS))
         if seed is not None:
             self.packed.arrays["params"]["seed"] = seed & 0xFFFFFFFF
         self.seed = int(self.packed.arrays["params"]["seed"][0])

@@ -45,7 +45,7 @@ __kernel void walk_inside(__global const BvhNode *nodes, __global const int *pri
         /* same side as the arriving ray's origin iff the signs of dot with ng differ */
         bool stays_inside = (dot(d_new, s.ng) > 0.0f) != (dot(d, s.ng) > 0.0f);
         d = d_new;
-        o = offset_origin(s.p, s.ng, d);
+        o = offset_origin(s.p, s.mag, s.ng, d);
         if (!stays_inside) break;
     }
     leaks[i] = leaked;

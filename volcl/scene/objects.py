@@ -16,6 +16,7 @@ from . import transform as tf
 from ..errors import VolclError
 from .model import Bsdf, Camera, Filter, Phase, Volume
 from .parse_common import Node
+from .properties import FLOAT32_MAX
 from .volfile import read_vol
 from .xml import Element
 
@@ -103,6 +104,51 @@ def check_volume_range(where: Element, name: str, volume: Volume, upper: Optiona
                           f"{high:g}{found}")
 
 
+def _shape_name(node: Node) -> str:
+    """How a shape is named in messages: its id and mesh file, where it has them."""
+    parts = [f"id '{node.element.attrs['id']}'"] if "id" in node.element.attrs else []
+    if node.has("filename"):
+        parts.append(f"mesh '{node.string('filename')}'")
+    return "the shape" + (f" ({', '.join(parts)})" if parts else "")
+
+
+def check_shape(node: Node, shape) -> None:
+    """Rules for a finished shape that no single parameter decides: an area emitter needs a mesh
+    with some area (in the float32 the kernels compute in; its triangles are sampled by area), and
+    an interior medium needs a closed, consistently wound mesh around it (the kernels tell inside
+    from outside by the side each triangle is crossed from)."""
+    if shape.kind != "mesh":
+        return
+    if shape.emitter_radiance is not None:
+        areas = meshes.triangle_areas32(shape.vertices, shape.faces)
+        if not areas.sum() > 0:
+            raise node.fail(None, f"{_shape_name(node)} carries an area emitter but its mesh has zero "
+                                  f"total area (all {len(areas)} triangles are degenerate in single "
+                                  f"precision): an emitter needs triangles of positive area")
+    if shape.interior is not None:
+        problem = meshes.closure_problem(shape.vertices, shape.faces)
+        if problem is not None:
+            raise node.fail(None, f"{_shape_name(node)} has an interior medium, but {problem}; a "
+                                  f"medium must be enclosed by a closed, consistently wound mesh "
+                                  f"(close the mesh, or give an open surface only an exterior medium)")
+
+
+def check_medium(node: Node, medium) -> None:
+    """Coefficients valid one by one can still overflow float32 once combined: sigma_t times
+    scale, and the emission sigma_a * radiance the kernels are given."""
+    def biggest(value):
+        return float(np.max(value.data if value.kind == "grid" else value.value)) \
+            if isinstance(value, Volume) else float(np.max(value))
+    sigma_t = biggest(medium.sigma_t) * medium.scale
+    limits = [("sigma_t (times scale)", sigma_t)]
+    if medium.radiance is not None:
+        limits.append(("the emission sigma_t * radiance", sigma_t * float(np.max(medium.radiance))))
+    for what, value in limits:
+        if not value <= FLOAT32_MAX:
+            raise node.fail(None, f"{what} reaches {value:.4g}, beyond the single-precision range "
+                                  f"volcl renders in (<= {FLOAT32_MAX:.7g})")
+
+
 def camera(node: Node, *, fov: float, fov_axis: str, width: int, height: int, near: float,
            far: float, to_world: np.ndarray, rfilter: Filter, names: dict) -> Camera:
     """Check and assemble a perspective camera; `names` maps field -> the dialect's parameter name."""
@@ -116,6 +162,9 @@ def camera(node: Node, *, fov: float, fov_axis: str, width: int, height: int, ne
         raise node.fail(names["near"], f"near clip must be > 0, got {near}")
     if not far > near:
         raise node.fail(names["far"], f"far clip ({far}) must exceed near clip ({near})")
+    if not (np.abs(to_world) <= FLOAT32_MAX).all():
+        raise node.fail(names["to_world"], "the camera's transform places it beyond the "
+                                           "single-precision floating-point range volcl renders in")
     scale = tf.similarity_scale(to_world)
     if scale is None or abs(scale - 1) > 1e-3:
         # As in Mitsuba 3: ray directions and the field of view assume an unscaled frame.

@@ -221,6 +221,7 @@ def build_shape(node: Node):
         shape = mesh_shape(mesh, to_world, bsdf=bsdf, source=node.source(),
                            where=node.at("to_world"), face_normals=node.bool("face_normals", False), flip_normals=flip)
     _attach_emitter_and_media(node, shape)
+    objects.check_shape(node, shape)
     shape.id = node.element.attrs.get("id", "")
     return shape
 
@@ -344,11 +345,13 @@ def build_medium(node: Node) -> Medium:
         volumes = _named_volumes(node)
         sigma_t = _volume_param(node, volumes, "sigma_t", 1.0, upper=None)
         albedo = _volume_param(node, volumes, "albedo", 0.75, upper=1.0)
-    return Medium(kind=node.type, sigma_t=sigma_t, albedo=albedo,
-                  scale=node.positive("scale", 1.0), phase=phase.obj if phase else Phase(),
-                  radiance=node.nonneg_color("volcl_radiance") if node.has("volcl_radiance")
-                  else None,
-                  id=node.element.attrs.get("id", ""), source=node.source())
+    medium = Medium(kind=node.type, sigma_t=sigma_t, albedo=albedo,
+                    scale=node.positive("scale", 1.0), phase=phase.obj if phase else Phase(),
+                    radiance=node.nonneg_color("volcl_radiance") if node.has("volcl_radiance")
+                    else None,
+                    id=node.element.attrs.get("id", ""), source=node.source())
+    objects.check_medium(node, medium)
+    return medium
 
 
 def _named_volumes(node: Node) -> dict:

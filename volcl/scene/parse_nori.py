@@ -141,6 +141,7 @@ def build_mesh(node: Node):
             raise emitter.element.error("only an area emitter can be attached to a mesh; point "
                                         "lights go directly inside <scene>")
         shape.emitter_radiance = emitter.obj.radiance
+    objects.check_shape(node, shape)
     shape.id = node.element.attrs.get("id", "")
     return shape
 
@@ -183,10 +184,12 @@ def build_medium(node: Node) -> Medium:
     positive = sigma_t > 0
     albedo = np.where(positive, np.minimum(sigma_s / np.where(positive, sigma_t, 1.0), 1.0), 0.0)
     phase = objects.phase_hg(node, "g", 0.0)
-    return Medium(kind="homogeneous", sigma_t=sigma_t, albedo=albedo,
-                  phase=phase if phase.g != 0 else Phase(),
-                  radiance=node.nonneg_color("radiance") if node.has("radiance") else None,
-                  id=node.element.attrs.get("id", ""), source=node.source())
+    medium = Medium(kind="homogeneous", sigma_t=sigma_t, albedo=albedo,
+                    phase=phase if phase.g != 0 else Phase(),
+                    radiance=node.nonneg_color("radiance") if node.has("radiance") else None,
+                    id=node.element.attrs.get("id", ""), source=node.source())
+    objects.check_medium(node, medium)
+    return medium
 
 
 DIALECT = Dialect(

@@ -30,11 +30,18 @@ class Prop:
     element: Element
 
 
+# The kernels compute in float32: a value beyond its range would reach them as infinity.
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
 def parse_float(text: str, el: Element, what: str) -> float:
     text = text.strip()
     value = float(text) if _FLOAT.match(text) else None
     if value is None or not math.isfinite(value):
         raise el.error(f"{what}: {text!r} is not a finite number")
+    if abs(value) > FLOAT32_MAX:
+        raise el.error(f"{what}: {text!r} is beyond the single-precision floating-point range volcl "
+                       f"renders in (|x| <= {FLOAT32_MAX:.7g})")
     return value
 
 

@@ -11,6 +11,7 @@ import numpy as np
 from .. import mesh as meshes
 from . import transform as tf
 from .model import Bsdf, Shape, Source
+from .properties import FLOAT32_MAX
 from .xml import Element
 
 PRIMITIVES = {
@@ -23,7 +24,7 @@ PRIMITIVES = {
 def mesh_shape(mesh: meshes.TriangleMesh, to_world: np.ndarray, *, bsdf: Bsdf, source: Source,
                where: Element, face_normals: bool = False, flip_normals: bool = False) -> Shape:
     vertices = tf.apply_point(to_world, mesh.vertices)
-    if not np.isfinite(vertices).all():
+    if not (np.abs(vertices) <= FLOAT32_MAX).all():     # the kernels hold them as float32
         raise where.error("to_world moves vertices beyond the floating-point range")
     normals = None
     if mesh.normals is not None and not face_normals:
@@ -45,7 +46,7 @@ def sphere_shape(center, radius: float, to_world: np.ndarray, *, bsdf: Bsdf, sou
                           "scale, translation); a non-uniform scale or shear would make it an "
                           "ellipsoid, which is not supported: use a mesh instead")
     center, radius = tf.apply_point(to_world, center), float(radius) * s
-    if not (np.isfinite(center).all() and np.isfinite(radius)):
+    if not ((np.abs(center) <= FLOAT32_MAX).all() and radius <= FLOAT32_MAX):
         raise where.error("to_world moves the sphere beyond the floating-point range")
     return Shape(kind="sphere", bsdf=bsdf, center=center, radius=radius,
                  flip_normals=flip_normals, source=source)
