@@ -14,11 +14,14 @@ def z_limit(comparisons: int, alpha: float = ALPHA) -> float:
     return float(norm.isf(per / 2))
 
 
-def assert_mean_matches(result, expected, blocks: int = 4, mask=None, what="image"):
+def assert_mean_matches(result, expected, blocks: int = 4, mask=None, what="image", expected_variance=None):
     """The render's mean equals `expected` (scalar, rgb or per-pixel (h, w, 3) array) within its
-    standard error: over the whole image per channel, and over blocks x blocks regions."""
+    standard error: over the whole image per channel, and over blocks x blocks regions.
+    expected_variance: per-pixel variance of an `expected` that is itself an estimate."""
     img = result.image.astype(np.float64)
     var = result.variance.astype(np.float64)
+    if expected_variance is not None:
+        var = var + np.broadcast_to(np.asarray(expected_variance, np.float64), img.shape)
     exp = np.broadcast_to(np.asarray(expected, np.float64), img.shape)
     m = np.ones(img.shape[:2], bool) if mask is None else mask
     h, w = img.shape[:2]
@@ -47,3 +50,10 @@ def assert_mean_matches(result, expected, blocks: int = 4, mask=None, what="imag
                                 f"{exp[sy, sx][sel][:, c].mean():.6g} (z = {z:.2f}, limit {limit:.2f})")
     assert not failures, f"{what}: " + "; ".join(failures[:6])
     assert result.invalid == 0, f"{what}: {result.invalid} invalid samples"
+
+
+def assert_images_match(a, b, blocks: int = 4, what="images"):
+    """Two independent renders (different seeds) estimate the same image: their difference is zero
+    within the standard error of both, over the whole image and over blocks x blocks regions."""
+    assert b.invalid == 0, f"{what}: {b.invalid} invalid samples in the second render"
+    assert_mean_matches(a, b.image, blocks=blocks, what=what, expected_variance=b.variance)

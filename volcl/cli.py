@@ -66,11 +66,12 @@ def _render_one(path, out, args, device):
     meta = {"scene": str(Path(path).resolve()), "spp": result.spp, "seed": renderer.seed,
             "device": result.device, "features": result.stats["features"],
             "render_seconds": round(result.seconds, 3), "version": __version__,
-            "invalid_samples": result.invalid}
+            "invalid_samples": result.invalid, "tracking_cutoffs": result.tracking_cutoffs}
     layers = {"variance": result.variance} if Path(out).suffix.lower() == ".exr" else None
     write_image(out, result.image, meta, layers)
     print(f"{out}: {result.spp} spp in {result.seconds:.2f} s, {result.samples_per_second / 1e6:.2f} M samples/s, "
-          f"invalid samples {result.invalid}, device {result.device}, features {result.stats['features']}")
+          f"invalid samples {result.invalid}, tracking cut-offs {result.tracking_cutoffs}, device {result.device}, "
+          f"features {result.stats['features']}")
     return result
 
 
@@ -115,6 +116,13 @@ def cmd_devices(args):
     return 0
 
 
+def _grid_text(volume):
+    if volume.kind != "grid":
+        return "constant extinction"
+    z, y, x, c = volume.data.shape
+    return f"{x}x{y}x{z} grid, {c} channel{'s' if c > 1 else ''}, {volume.filter}"
+
+
 def cmd_info(args):
     from .features import FLAGS, describe, detect
     from .pack import pack
@@ -128,7 +136,8 @@ def cmd_info(args):
     print(f"shapes     {len(scene.shapes)} ({packed.triangle_count} triangles, {packed.sphere_count} spheres)")
     kinds = ["area"] * sum(s.emitter_radiance is not None for s in scene.shapes) + [e.kind for e in scene.emitters]
     print(f"emitters   {len(kinds)}" + (f" ({', '.join(kinds)})" if kinds else ""))
-    print(f"media      {len(scene.media)}")
+    media_kinds = [m.kind + (f" ({_grid_text(m.sigma_t)})" if m.kind == "heterogeneous" else "") for m in scene.media]
+    print(f"media      {len(scene.media)}" + (f": {', '.join(media_kinds)}" if media_kinds else ""))
     print(f"features   {describe(feats)}")
     print("flags      " + " ".join(f"VOLCL_HAS_{n}={int(feats[n])}" for n in FLAGS))
     if not args.no_build:

@@ -30,6 +30,9 @@ class RenderResult:
     features: dict
     build_seconds: float
     stats: dict = field(default_factory=dict)
+    # medium segments whose delta / ratio tracking hit its step bound and was cut short (each a
+    # biased estimate; never happens in ordinary scenes, see kernels/media.h)
+    tracking_cutoffs: int = 0
 
     @property
     def samples_per_second(self) -> float:
@@ -41,13 +44,14 @@ class Renderer:
     """A scene uploaded to one device with its program built, ready for sample passes."""
 
     ARG_ORDER = ("nodes", "prim_ids", "triangles", "normals", "spheres", "shapes", "bsdfs", "lights",
-                 "light_tri_cdf", "light_tris", "media", "params", "filter_table")
+                 "light_tri_cdf", "light_tris", "media", "grids", "grid_data", "params", "filter_table")
 
     def __init__(self, scene: Scene, device: devmod.DeviceInfo | None = None, features: dict | None = None,
-                 seed: int | None = None):
+                 seed: int | None = None, majorant_cells: int | None = None, majorant_scale: float = 1.0):
+        """majorant_cells and majorant_scale: see pack.pack (for tests and benchmarks)."""
         self.scene = scene
         self.device = device or devmod.choose()
-        self.packed = pack(scene, features)
+        self.packed = pack(scene, features, majorant_cells=majorant_cells, majorant_scale=majorant_scale)
         if seed is not None:
             self.packed.arrays["params"]["seed"] = seed & 0xFFFFFFFF
         self.seed = int(self.packed.arrays["params"]["seed"][0])
@@ -69,10 +73,11 @@ class Renderer:
         self.sums = cl.Buffer(self.ctx, mf.READ_WRITE, 16 * n)
         self.sums_sq = cl.Buffer(self.ctx, mf.READ_WRITE, 16 * n)
         self.invalid = cl.Buffer(self.ctx, mf.READ_WRITE, 4 * n)
+        self.cutoffs = cl.Buffer(self.ctx, mf.READ_WRITE, 4 * n)
         self.reset()
 
     def reset(self):
-        for buf in (self.sums, self.sums_sq, self.invalid):
+        for buf in (self.sums, self.sums_sq, self.invalid, self.cutoffs):
             cl.enqueue_fill_buffer(self.queue, buf, np.zeros(1, np.float32), 0, buf.size)
         self.samples_done = 0
         self.seconds = 0.0
@@ -80,7 +85,7 @@ class Renderer:
     def _launch(self, sample_base: int, slots: int):
         for first in range(0, self.npix, self.tile):
             count = min(self.tile, self.npix - first)
-            self.kernel.set_args(*self.buffers, self.sums, self.sums_sq, self.invalid,
+            self.kernel.set_args(*self.buffers, self.sums, self.sums_sq, self.invalid, self.cutoffs,
                                  np.uint32(sample_base), np.int32(first), np.int32(count), np.int32(slots))
             cl.enqueue_nd_range_kernel(self.queue, self.kernel, (count * slots,), None)
 
@@ -106,9 +111,11 @@ class Renderer:
         sums = np.empty((n, 4), np.float32)
         sums_sq = np.empty((n, 4), np.float32)
         invalid = np.empty(n, np.uint32)
+        cutoffs = np.empty(n, np.uint32)
         cl.enqueue_copy(self.queue, sums, self.sums)
         cl.enqueue_copy(self.queue, sums_sq, self.sums_sq)
         cl.enqueue_copy(self.queue, invalid, self.invalid)
+        cl.enqueue_copy(self.queue, cutoffs, self.cutoffs)
         s = sums.astype(np.float64).reshape(self.slots, self.npix, 4).sum(0)
         ss = sums_sq.astype(np.float64).reshape(self.slots, self.npix, 4).sum(0)
         count = s[:, 3:4]
@@ -121,12 +128,14 @@ class Renderer:
             image=mean.reshape(shape).astype(np.float32), variance=var_mean.reshape(shape).astype(np.float32),
             spp=self.samples_done, invalid=int(invalid.sum()), seconds=self.seconds,
             device=f"{self.device.key} {self.device.name}", features=self.packed.features,
-            build_seconds=self.build_seconds,
+            build_seconds=self.build_seconds, tracking_cutoffs=int(cutoffs.sum(dtype=np.uint64)),
             stats={"triangles": self.packed.triangle_count, "spheres": self.packed.sphere_count,
-                   "bvh_seconds": self.packed.bvh_seconds, "features": describe(self.packed.features)})
+                   "bvh_seconds": self.packed.bvh_seconds, "features": describe(self.packed.features),
+                   **self.packed.stats})
 
 
 def render(scene: Scene, spp: int | None = None, device=None, features=None, seed=None, progress=None,
-           time_limit=None) -> RenderResult:
-    r = Renderer(scene, device=device, features=features, seed=seed)
+           time_limit=None, majorant_cells=None, majorant_scale=1.0) -> RenderResult:
+    r = Renderer(scene, device=device, features=features, seed=seed, majorant_cells=majorant_cells,
+                 majorant_scale=majorant_scale)
     return r.render(spp if spp is not None else scene.spp, progress=progress, time_limit=time_limit)
