@@ -102,3 +102,19 @@ def test_define_that_the_scene_never_reads_is_an_error(tmp_path):
     r = volcl("render", "scenes/cbox.xml", "-o", tmp_path / "x.png", "-D", "sppp=4")
     assert r.returncode == 2
     assert "-D sppp" in r.stderr and "spp" in r.stderr
+
+
+def test_render_grid_scene_reports_tracking_cutoffs(tmp_path):
+    """The smoke scene (a heterogeneous medium): the summary line and the EXR carry the number of
+    tracking cut-offs, zero here."""
+    exr = tmp_path / "smoke.exr"
+    r = volcl("render", "scenes/smoke_grid.xml", "-o", exr, "--spp", 2, "--width", 24, "--height", 24, "-q")
+    assert r.returncode == 0, r.stderr
+    assert "tracking cut-offs 0" in r.stdout
+    img, attrs = read_image(exr)
+    assert attrs["volcl:tracking_cutoffs"] == 0 and attrs["volcl:invalid_samples"] == 0
+    assert "grid_media" in attrs["volcl:features"]
+    r = volcl("info", "scenes/smoke_grid.xml", "--no-build")
+    assert r.returncode == 0, r.stderr
+    assert "heterogeneous (48x48x48 grid, 1 channel, trilinear)" in r.stdout
+    assert "VOLCL_HAS_GRID_MEDIA=1" in r.stdout

@@ -287,3 +287,10 @@ def test_heterogeneous_medium_with_constant_sigma_t_warns_and_keeps_to_world(tmp
     (warning,) = [w for w in s.warnings if "constant 'sigma_t'" in w]
     assert "scene.xml:2" in warning and "unit cube" in warning
 
+
+def test_shipped_smoke_scene_loads_its_grid():
+    s = load(Path(__file__).resolve().parent.parent / "scenes" / "smoke_grid.xml")
+    (smoke,) = s.media
+    assert smoke.kind == "heterogeneous" and smoke.sigma_t.kind == "grid"
+    assert smoke.sigma_t.data.shape == (48, 48, 48, 1) and smoke.sigma_t.filter == "trilinear"
+    assert s.warnings == []
