@@ -10,11 +10,12 @@
    grids.MAJORANT_CELL_VOXELS voxels per axis, 12^3 here), for each of --densities (the scene
    parameter `density`, the medium's scale: its largest extinction per unit length; the scene's
    own default is 15; `--densities` alone keeps the scene as it is). "seconds" is the best of
-   --repeat warm renders at --spp (after a 1-spp warm-up on the same Renderer); "M samples/s" is
+   --repeat warm renders at --spp (after a 1-spp warm-up on the same Renderer; the repeats cycle
+   through the variants, so load from other processes spreads over all of them); "M samples/s" is
    width * height * spp / seconds / 1e6; "speed-up" is relative to the single global majorant.
    Every variant estimates the same image: the table also gives the difference of its image mean
-   from the default's in standard errors (z), which should stay within a few (at low spp the
-   variance estimate itself is rough).
+   from the default's in standard errors (z per channel r g b), which should stay within a few
+   (at low spp the variance estimate itself is rough: the light's edge pixels are all-or-nothing).
 2. Agreement with Mitsuba 3 `volpathmis` on the same file, when Mitsuba is found (--mitsuba-python,
    $VOLCL_MITSUBA_PYTHON, or this interpreter): benchmarks/compare_mitsuba.py at --compare-spp with
    the same -D values (R about 1 and PASS when both renderers estimate the same image).
@@ -45,18 +46,23 @@ def log(msg):
     print(msg, file=sys.stderr, flush=True)
 
 
-def timed_render(scene, device, spp, repeat, cells, seed):
+def timed_renders(scene, device, spp, repeat, variants, seed):
+    """Best-of-`repeat` seconds and the last result per variant (majorant cells). The repeats
+    interleave the variants, so that a load change on a shared machine hits them alike."""
     from volcl.render import Renderer
-    best, result = math.inf, None
-    for _ in range(repeat):
-        r = Renderer(scene, device=device, seed=seed, majorant_cells=cells)
+    renderers = []
+    for k, cells in enumerate(variants):
+        r = Renderer(scene, device=device, seed=seed + k, majorant_cells=cells)
         r.render(1)                     # warm-up: PoCL compiles the work-group function at first launch
-        r.reset()
-        t0 = time.perf_counter()
-        res = r.render(spp)
-        best = min(best, time.perf_counter() - t0)
-        result = res
-    return best, result, r.packed.stats["majorant_cells"]
+        renderers.append(r)
+    best, results = [math.inf] * len(variants), [None] * len(variants)
+    for _ in range(repeat):
+        for k, r in enumerate(renderers):
+            r.reset()
+            t0 = time.perf_counter()
+            results[k] = r.render(spp)
+            best[k] = min(best[k], time.perf_counter() - t0)
+    return best, results, [r.packed.stats["majorant_cells"] for r in renderers]
 
 
 def main(argv=None):
@@ -82,7 +88,7 @@ def main(argv=None):
     device = devmod.choose(args.device)
     print(f"scene {args.scene}, {args.spp} spp, best of {args.repeat}; volcl on {device.key} {device.name}; "
           f"default majorant cell: {MAJORANT_CELL_VOXELS} voxels per axis\n")
-    print("| density | majorant cells | count | seconds | M samples/s | speed-up vs global | mean z vs default "
+    print("| density | majorant cells | count | seconds | M samples/s | speed-up vs global | mean z (r g b) vs default "
           "| cut-offs |")
     print("|---:|---|---:|---:|---:|---:|---:|---:|")
     variants = [(None, "default")] + [(c, f"{c}^3" + (" (global)" if c == 1 else "")) for c in args.cells]
@@ -90,19 +96,20 @@ def main(argv=None):
         defines = dict(base, **({"density": density} if density is not None else {}))
         scene = load(args.scene, defines)
         w, h = scene.camera.width, scene.camera.height
-        rows, ref = [], None
-        for cells, label in variants:
-            log(f"density {density}, majorant grid {label} ...")
-            secs, res, ncells = timed_render(scene, device, args.spp, args.repeat, cells, args.seed + len(rows))
-            ref = ref or res
-            rows.append((label, ncells, secs, w * h * args.spp / secs / 1e6, res))
+        log(f"density {density} ...")
+        secs, results, ncells = timed_renders(scene, device, args.spp, args.repeat, [c for c, _ in variants],
+                                              args.seed)
+        ref = results[0]
+        rows = [(label, n, t, w * h * args.spp / t / 1e6, res)
+                for (_, label), n, t, res in zip(variants, ncells, secs, results)]
         global_rate = next((r[3] for r in rows if r[0].startswith("1^3")), None)
         for label, ncells, secs, rate, res in rows:
             z = "-"
             if res is not ref:
-                diff = res.image.astype(np.float64).mean() - ref.image.astype(np.float64).mean()
-                var = res.variance.astype(np.float64).sum() + ref.variance.astype(np.float64).sum()
-                z = f"{diff / (math.sqrt(var) / (w * h * 3)):+.2f}"
+                # per channel: a pixel's channels are correlated, so only pixels add independently
+                diff = (res.image.astype(np.float64) - ref.image.astype(np.float64)).reshape(-1, 3).sum(0)
+                var = (res.variance.astype(np.float64) + ref.variance.astype(np.float64)).reshape(-1, 3).sum(0)
+                z = " ".join(f"{v:+.1f}" for v in diff / np.sqrt(var))
             speed = f"{rate / global_rate:.2f}x" if global_rate else "-"
             print(f"| {density or 'scene'} | {label} | {ncells} | {secs:.2f} | {rate:.3f} | {speed} | {z} "
                   f"| {res.tracking_cutoffs} |", flush=True)
