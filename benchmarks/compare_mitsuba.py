@@ -60,7 +60,8 @@ def render_volcl(scene_path, out, spp, seed, defines, device):
     res = r.render(spp)
     write_image(out, res.image, {"scene": str(scene_path), "spp": res.spp, "seed": r.seed, "device": res.device,
                                  "features": res.stats["features"], "render_seconds": round(res.seconds, 3),
-                                 "version": __version__, "invalid_samples": res.invalid},
+                                 "version": __version__, "invalid_samples": res.invalid,
+                                 "tracking_cutoffs": res.tracking_cutoffs},
                 {"variance": res.variance})
     return res
 

@@ -59,8 +59,11 @@ inline int camera_start_medium(const SceneData *sc, float3 *o, float3 d, float *
 }
 
 /* Fraction of light that travels from o along w for distance t_max: zero if an opaque or refracting
- * surface is in the way, otherwise the product of the transmittances of the media crossed. */
-inline float3 shadow_transmittance(const SceneData *sc, float3 o, float3 w, float t_max, int medium) {
+ * surface is in the way, otherwise the product of the transmittances of the media crossed (for
+ * heterogeneous media an unbiased ratio-tracking estimate, which draws from rng; tracking cut-offs
+ * are counted in *cutoffs). */
+inline float3 shadow_transmittance(const SceneData *sc, float3 o, float3 w, float t_max, int medium, Rng *rng,
+                                   uint *cutoffs) {
 #if VOLCL_HAS_MEDIA || VOLCL_HAS_NULL_BSDF
     float3 tr = (float3)(1.0f);
     float t_back = 0.0f;    /* from the boundary just crossed to the offset origin: see integrator_radiance */
@@ -69,7 +72,7 @@ inline float3 shadow_transmittance(const SceneData *sc, float3 o, float3 w, floa
         bool hit = bvh_trace(sc, o, w, t_max, false, &h);
         float seg = (hit ? h.t : t_max) + t_back;
 #if VOLCL_HAS_MEDIA
-        if (medium >= 0) tr *= medium_transmittance(&sc->media[medium], seg);
+        if (medium >= 0) tr = medium_attenuate(sc, &sc->media[medium], o - t_back * w, w, seg, tr, rng, cutoffs);
 #endif
         if (!hit) return tr;
         SurfacePoint s = surface_point(sc, &h, o, w);
@@ -101,16 +104,17 @@ inline float hit_weight(__global const RenderParams *rp, float pdf_scatter, floa
 /* Light arriving at a vertex by next-event estimation, already weighted by MIS against `scatter_pdf`.
  * `f` is the vertex's scattering value towards ls.wi (BSDF value * cos, or phase value). */
 inline float3 nee_contribution(const SceneData *sc, const LightSample *ls, float3 f, float scatter_pdf,
-                               float3 origin, int medium) {
+                               float3 origin, int medium, Rng *rng, uint *cutoffs) {
     /* stop a hair before the light so the shadow ray never hits the emitter itself */
     float t_max = ls->dist < INFINITY ? ls->dist * 0.9999f : INFINITY;
-    float3 tr = shadow_transmittance(sc, origin, ls->wi, t_max, medium);
+    float3 tr = shadow_transmittance(sc, origin, ls->wi, t_max, medium, rng, cutoffs);
     if (max_component(tr) <= 0.0f) return (float3)(0.0f);
     float w = (ls->delta || !sc->params->mis) ? 1.0f : power_heuristic(ls->pdf, scatter_pdf);
     return f * ls->value * tr * (w / ls->pdf);
 }
 
-inline float3 integrator_radiance(const SceneData *sc, Rng *rng, float3 o, float3 d, float t_max) {
+/* Radiance arriving at o from direction -d. *cutoffs counts segments whose tracking hit its bound. */
+inline float3 integrator_radiance(const SceneData *sc, Rng *rng, float3 o, float3 d, float t_max, uint *cutoffs) {
     __global const RenderParams *rp = sc->params;
     float3 L = (float3)(0.0f), beta = (float3)(1.0f);
     int depth = 0;
@@ -136,13 +140,17 @@ inline float3 integrator_radiance(const SceneData *sc, Rng *rng, float3 o, float
 #if VOLCL_HAS_MEDIA
         if (medium >= 0) {
             __global const Medium *m = &sc->media[medium];
-            float u_channel = rng_next_float(rng);
-            MediumSample ms = medium_sample_distance(m, (hit ? h.t : t_max) + t_back, beta, u_channel,
-                                                     rng_next_float(rng));
+            /* the segment starts at the surface the ray left, t_back behind the offset origin */
+            MediumSample ms = medium_sample(sc, m, o - t_back * d, d, (hit ? h.t : t_max) + t_back, beta, rng,
+                                            cutoffs);
 #if VOLCL_HAS_EMISSIVE_MEDIA
             L += beta * ms.emission;
 #endif
             beta *= ms.weight;
+#if VOLCL_HAS_GRID_MEDIA
+            /* null collisions left no weight, or tracking was cut off (counted): nothing more to carry */
+            if (!ms.scattered && max_component(beta) <= 0.0f) break;
+#endif
             if (ms.scattered) {
                 float3 p = o + (ms.t - t_back) * d;
                 if (rp->max_depth >= 0 && depth + 1 >= rp->max_depth) break;
@@ -154,7 +162,7 @@ inline float3 integrator_radiance(const SceneData *sc, Rng *rng, float3 o, float
                     float2 ul = rng_next_float2(rng);
                     if (light_sample(sc, p, u_pick, ul, &ls) && max_component(ls.value) > 0.0f) {
                         float ph = phase_eval(m, d, ls.wi);
-                        L += beta * nee_contribution(sc, &ls, (float3)(ph), ph, p, medium);
+                        L += beta * nee_contribution(sc, &ls, (float3)(ph), ph, p, medium, rng, cutoffs);
                     }
                 }
                 float3 nd;
@@ -222,7 +230,7 @@ inline float3 integrator_radiance(const SceneData *sc, Rng *rng, float3 o, float
                     float3 f = bsdf_eval(bsdf, wo, frame_to_local(ls.wi, ss, ts, s.ns), &pdf);
                     if (max_component(f) > 0.0f) {
                         L += beta * nee_contribution(sc, &ls, f, pdf, offset_origin(s.p, s.mag, s.ng, ls.wi),
-                                                     medium_after(sc, &s, ls.wi, medium));
+                                                     medium_after(sc, &s, ls.wi, medium), rng, cutoffs);
                     }
                 }
             } else {

@@ -9,6 +9,8 @@
 #ifndef VOLCL_MEDIA_H
 #define VOLCL_MEDIA_H
 
+#include "grid.h"   /* heterogeneous media look their grids up through it */
+
 /* exp(-sigma * t) that is 1 for sigma = 0 and 0 for t = INF, never NaN from 0 * INF. */
 inline float3 transmittance_exp(float3 sigma, float t) {
     float3 tau = sigma * t;
@@ -68,6 +70,188 @@ inline MediumSample medium_sample_distance(__global const Medium *m, float t_max
 
 inline float3 medium_transmittance(__global const Medium *m, float t) {
     return transmittance_exp(vload_f3(m->sigma_t), t);
+}
+
+#if VOLCL_HAS_GRID_MEDIA
+/* Heterogeneous media: delta tracking (free flights) and ratio tracking (transmittance) against a
+ * piecewise-constant majorant mu >= max over channels of sigma_t, read from the density grid's coarse
+ * majorant grid along the ray (kernels/grid.h walks it).
+ *
+ * The estimator (null-collision form, per colour channel c, with sigma_n = mu - sigma_t >= 0):
+ *   L_c(0) = int_0^T exp(-int_0^t mu) [sigma_a,c Le_c + sigma_s,c Ls_c + sigma_n,c L_c(t)] dt
+ *            + exp(-int_0^T mu) L_c(T).
+ * The majorant is the same for all channels, so tentative collisions are drawn from the density
+ * mu exp(-int mu) of every channel at once, and reaching the segment end has probability
+ * exp(-int mu): both cancel exactly, per channel. At a tentative collision the emission term is
+ * added in full (sigma_a Le / mu) and one of the two remaining terms is chosen: the real collision
+ * with probability P_r = <p, sigma_t> / (<p, sigma_t> + <p, sigma_n>), else the null collision,
+ * where p are channel probabilities proportional to the current path weight. The chosen term is
+ * divided by mu times its probability, which gives the weights
+ *   real: albedo * sigma_t * (<p, sigma_t> + <p, sigma_n>) / (mu <p, sigma_t>)
+ *   null: sigma_n * (<p, sigma_t> + <p, sigma_n>) / (mu <p, sigma_n>)
+ * per channel. This is unbiased for every channel simultaneously because a term is chosen with
+ * non-zero probability whenever it is non-zero in any channel the path still carries (p_c > 0), and
+ * divided by exactly that probability; it is the one-sample balance heuristic over channels
+ * (spectral MIS, Miller et al. 2019), so no channel's weight exceeds 1 / p_c times its own ratio.
+ * For grey extinction both weights reduce to classic delta tracking (albedo, and 1).
+ * Ratio tracking multiplies the transmittance by sigma_n / mu at every tentative collision.
+ *
+ * The bound VOLCL_MAX_TRACKING_STEPS (cells visited plus tentative collisions per segment) cannot
+ * bias ordinary scenes: the number of tentative collisions is Poisson with mean equal to the
+ * majorant optical depth of the segment (less for delta tracking, which stops at the first real
+ * collision), and P(N >= 65536) is below 1e-1000 for any mean under 10^4, i.e. optical depths far
+ * beyond visible detail. A segment that hits it ends the path (or blocks the shadow ray), which
+ * is biased, so every hit is counted in *cutoffs and reported. */
+#define VOLCL_MAX_TRACKING_STEPS 65536
+/* Ratio tracking plays Russian roulette below this transmittance (as pbrt-v4 does). */
+#define VOLCL_RR_TRANSMITTANCE 0.05f
+
+/* Probability of each channel for choosing between collision types: proportional to the weight the
+ * path carries in it, uniform when it carries none. */
+inline float3 medium_channel_probs(float3 beta) {
+    float3 p = fmax(beta, 0.0f);
+    float total = p.x + p.y + p.z;
+    return total > 0.0f ? p / total : (float3)(1.0f / 3.0f);
+}
+
+inline float3 medium_grid_albedo(const SceneData *sc, __global const Medium *m, float3 p) {
+    __global const GridVolume *v = &sc->grids[m->albedo_grid];
+    return grid_lookup(sc->grid_data, v, grid_point_to_local(v, p));
+}
+
+/* Exponential optical depth to the next tentative collision (u < 1, so always finite). */
+inline float medium_sample_tau(Rng *rng) { return -log1p(-rng_next_float(rng)); }
+
+inline MediumSample medium_grid_sample_distance(const SceneData *sc, __global const Medium *m, float3 o,
+                                                float3 d, float t_max, float3 beta, Rng *rng,
+                                                uint *cutoffs) {
+    MediumSample ms;
+    ms.t = t_max;
+    ms.scattered = false;
+    ms.weight = (float3)(1.0f);
+    ms.emission = (float3)(0.0f);
+    __global const GridVolume *v = &sc->grids[m->sigma_t_grid];
+    float3 ol = grid_point_to_local(v, o), dl = grid_dir_to_local(v, d);
+    float t0, t1;
+    if (!grid_clip(ol, dl, t_max, &t0, &t1)) return ms;
+    GridWalk walk = grid_walk_begin(v, ol, dl, t0, t1);
+    float maj_scale = sc->params->majorant_scale;
+#if VOLCL_HAS_EMISSIVE_MEDIA
+    float3 le = vload_f3(m->emission);
+    bool emits = max_component(le) > 0.0f;
+#endif
+    float3 w = (float3)(1.0f);      /* weight of the null collisions so far */
+    float tau = medium_sample_tau(rng);
+    int steps = 0;
+    float ta, tb, mu;
+    while (grid_walk_next(&walk, sc->grid_data, v, &ta, &tb, &mu)) {
+        mu *= maj_scale;
+        for (;;) {
+            if (++steps > VOLCL_MAX_TRACKING_STEPS) {
+                *cutoffs += 1u;
+                ms.weight = (float3)(0.0f);
+                return ms;
+            }
+            /* memoryless: the optical depth left over at the cell's end carries into the next cell */
+            float span = mu * (tb - ta);
+            if (tau >= span) {
+                tau -= span;
+                break;
+            }
+            float t = ta + tau / mu;
+            ta = t;
+            tau = medium_sample_tau(rng);
+            float3 sigma_t = grid_lookup(sc->grid_data, v, walk.pe + (t - walk.t0) * walk.dl);
+            float3 sigma_n = fmax(mu - sigma_t, 0.0f);
+            float3 albedo = (float3)(-1.0f);
+#if VOLCL_HAS_EMISSIVE_MEDIA
+            if (emits) {
+                albedo = medium_grid_albedo(sc, m, o + t * d);
+                ms.emission += w * sigma_t * (1.0f - albedo) * le / mu;
+            }
+#endif
+            float3 p = medium_channel_probs(beta * w);
+            float pt = dot(p, sigma_t), pn = dot(p, sigma_n);
+            /* pn = 0 only where sigma_t reaches the majorant in every carried channel (then the
+             * collision is real for sure); the test keeps rounding from dividing by it */
+            if (rng_next_float(rng) * (pt + pn) < pt || !(pn > 0.0f)) {
+                if (albedo.x < 0.0f) albedo = medium_grid_albedo(sc, m, o + t * d);
+                ms.t = t;
+                ms.scattered = true;
+                ms.weight = pt > 0.0f ? w * albedo * sigma_t * ((pt + pn) / (mu * pt)) : (float3)(0.0f);
+                return ms;
+            }
+            w *= sigma_n * ((pt + pn) / (mu * pn));
+            if (!(max_component(w) > 0.0f)) {
+                ms.weight = (float3)(0.0f);
+                return ms;
+            }
+        }
+    }
+    ms.weight = w;
+    return ms;
+}
+
+/* `tr` times a ratio-tracking estimate of the transmittance of the segment [0, t_max]. Russian
+ * roulette acts on the product, so a shadow ray through several media stops once the light it
+ * could still carry is small; survival probability max(T) / 0.05 keeps the estimate unbiased. */
+inline float3 medium_grid_transmittance(const SceneData *sc, __global const Medium *m, float3 o, float3 d,
+                                        float t_max, float3 tr, Rng *rng, uint *cutoffs) {
+    __global const GridVolume *v = &sc->grids[m->sigma_t_grid];
+    float3 ol = grid_point_to_local(v, o), dl = grid_dir_to_local(v, d);
+    float t0, t1;
+    if (!grid_clip(ol, dl, t_max, &t0, &t1)) return tr;
+    GridWalk walk = grid_walk_begin(v, ol, dl, t0, t1);
+    float maj_scale = sc->params->majorant_scale;
+    float tau = medium_sample_tau(rng);
+    int steps = 0;
+    float ta, tb, mu;
+    while (grid_walk_next(&walk, sc->grid_data, v, &ta, &tb, &mu)) {
+        mu *= maj_scale;
+        for (;;) {
+            if (++steps > VOLCL_MAX_TRACKING_STEPS) {
+                *cutoffs += 1u;
+                return (float3)(0.0f);
+            }
+            float span = mu * (tb - ta);
+            if (tau >= span) {
+                tau -= span;
+                break;
+            }
+            float t = ta + tau / mu;
+            ta = t;
+            tau = medium_sample_tau(rng);
+            float3 sigma_t = grid_lookup(sc->grid_data, v, walk.pe + (t - walk.t0) * walk.dl);
+            tr *= fmax(mu - sigma_t, 0.0f) / mu;
+            float t_big = max_component(tr);
+            if (t_big < VOLCL_RR_TRANSMITTANCE) {
+                float q = t_big / VOLCL_RR_TRANSMITTANCE;
+                if (!(rng_next_float(rng) < q)) return (float3)(0.0f);
+                tr /= q;
+            }
+        }
+    }
+    return tr;
+}
+#endif
+
+/* Free flight through medium m from o along d, up to t_max (the next surface or the ray's end). */
+inline MediumSample medium_sample(const SceneData *sc, __global const Medium *m, float3 o, float3 d,
+                                  float t_max, float3 beta, Rng *rng, uint *cutoffs) {
+#if VOLCL_HAS_GRID_MEDIA
+    if (m->type == MEDIUM_HETEROGENEOUS) return medium_grid_sample_distance(sc, m, o, d, t_max, beta, rng, cutoffs);
+#endif
+    float u_channel = rng_next_float(rng);
+    return medium_sample_distance(m, t_max, beta, u_channel, rng_next_float(rng));
+}
+
+/* tr times the transmittance (or an unbiased estimate of it) of medium m along o + t d, t in [0, t_max]. */
+inline float3 medium_attenuate(const SceneData *sc, __global const Medium *m, float3 o, float3 d, float t_max,
+                               float3 tr, Rng *rng, uint *cutoffs) {
+#if VOLCL_HAS_GRID_MEDIA
+    if (m->type == MEDIUM_HETEROGENEOUS) return medium_grid_transmittance(sc, m, o, d, t_max, tr, rng, cutoffs);
+#endif
+    return tr * medium_transmittance(m, t_max);
 }
 
 #endif

@@ -90,22 +90,46 @@ typedef struct {
 } Light;
 
 #define MEDIUM_HOMOGENEOUS 0
+#define MEDIUM_HETEROGENEOUS 1
 
 #define PHASE_ISOTROPIC 0
 #define PHASE_HG 1
 
+/* Homogeneous media use sigma_t, albedo and emission. Heterogeneous media read extinction and albedo
+ * from the GridVolumes sigma_t_grid and albedo_grid, and `emission` holds the radiance Le: the
+ * medium emits sigma_a(x) * Le per unit length. */
 typedef struct {
     int type;
     int phase;
     float g;
-    int pad0;
+    int sigma_t_grid;   /* heterogeneous: index into the grid descriptors, else -1 */
     float sigma_t[3];   /* extinction, scale already applied */
-    float pad1;
+    int albedo_grid;    /* heterogeneous: index into the grid descriptors, else -1 */
     float albedo[3];
     float pad2;
-    float emission[3];  /* sigma_a * radiance: emitted radiance per unit length */
+    float emission[3];  /* homogeneous: sigma_a * radiance (per unit length); heterogeneous: radiance */
     float pad3;
 } Medium;
+
+#define GRID_TRILINEAR 0
+#define GRID_NEAREST 1
+
+/* A grid of 1 or 3 channels filling the unit cube [0,1]^3 of its own frame (kernels/grid.h has the
+ * lookup conventions). Voxel (x, y, z) channel c is grid_data[data + ((z * res[1] + y) * res[0] + x)
+ * * channels + c], the .vol file's order. Extinction grids carry the medium's scale already, and a
+ * coarse majorant grid of maj_res cells over the same cube at grid_data[majorants], x fastest: each
+ * cell the largest value (over channels) that a lookup anywhere in the cell can return. Constant
+ * volumes are 1x1x1 grids. */
+typedef struct {
+    float to_local[12];     /* world -> unit cube, row-major 3x4 */
+    int res[3];
+    int channels;
+    int maj_res[3];         /* 0 0 0 for grids that are never tracked (albedo) */
+    int filter;
+    int data;
+    int majorants;          /* -1 without a majorant grid */
+    int pad0[2];
+} GridVolume;
 
 /* Everything a sample pass needs besides the scene buffers. */
 typedef struct {
@@ -129,7 +153,8 @@ typedef struct {
     float scene_center[3];
     int nee;                /* next-event estimation on (1) or off (0: lights are found by hitting them) */
     int mis;                /* with nee: combine with BSDF / phase sampling by MIS (1) or not (0) */
-    int pad0[2];
+    float majorant_scale;   /* every majorant is multiplied by this (>= 1; 1 = tight); a test knob */
+    int pad0;
 } RenderParams;
 
 #endif

@@ -14,11 +14,14 @@ def z_limit(comparisons: int, alpha: float = ALPHA) -> float:
     return float(norm.isf(per / 2))
 
 
-def assert_mean_matches(result, expected, blocks: int = 4, mask=None, what="image"):
+def assert_mean_matches(result, expected, blocks: int = 4, mask=None, what="image", expected_variance=None):
     """The render's mean equals `expected` (scalar, rgb or per-pixel (h, w, 3) array) within its
-    standard error: over the whole image per channel, and over blocks x blocks regions."""
+    standard error: over the whole image per channel, and over blocks x blocks regions.
+    expected_variance: per-pixel variance of an `expected` that is itself an estimate."""
     img = result.image.astype(np.float64)
     var = result.variance.astype(np.float64)
+    if expected_variance is not None:
+        var = var + np.broadcast_to(np.asarray(expected_variance, np.float64), img.shape)
     exp = np.broadcast_to(np.asarray(expected, np.float64), img.shape)
     m = np.ones(img.shape[:2], bool) if mask is None else mask
     h, w = img.shape[:2]
@@ -71,3 +74,10 @@ def assert_same_image(a, b, blocks: int = 4, what="images"):
                     failures.append(f"block ({i},{j}) channel {c}: difference {d.mean(0)[c]:.4g} (z = {z[c]:.2f})")
     assert not failures, f"{what}: " + "; ".join(failures[:6])
     assert a.invalid == 0 and b.invalid == 0, f"{what}: invalid samples {a.invalid}, {b.invalid}"
+
+
+def assert_images_match(a, b, blocks: int = 4, what="images"):
+    """Two independent renders (different seeds) estimate the same image: their difference is zero
+    within the standard error of both, over the whole image and over blocks x blocks regions."""
+    assert b.invalid == 0, f"{what}: {b.invalid} invalid samples in the second render"
+    assert_mean_matches(a, b.image, blocks=blocks, what=what, expected_variance=b.variance)

@@ -1,7 +1,7 @@
 """Small scenes built directly from volcl's data model, for tests with analytic answers."""
 import numpy as np
 
-from volcl.scene.model import Bsdf, Camera, Emitter, Filter, Integrator, Medium, Phase, Scene, Shape, rgb
+from volcl.scene.model import Bsdf, Camera, Emitter, Filter, Integrator, Medium, Phase, Scene, Shape, Volume, rgb
 
 CUBE_QUADS = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
 
@@ -66,6 +66,31 @@ def furnace(albedo, radiance=1.0, max_depth=-1, medium=None):
 def medium(sigma_t, albedo, g=0.0, radiance=None):
     phase = Phase("hg", g) if g != 0 else Phase("isotropic")
     return Medium("homogeneous", sigma_t=rgb(sigma_t), albedo=rgb(albedo), phase=phase,
+                  radiance=None if radiance is None else rgb(radiance))
+
+
+def grid(data, to_world=None, filter="trilinear"):
+    """A grid volume; data (z, y, x) or (z, y, x, c), filling to_world's image of the unit cube."""
+    a = np.asarray(data, np.float32)
+    a = a[..., None] if a.ndim == 3 else a
+    return Volume("grid", value=rgb(0.0), data=a, to_world=np.eye(4) if to_world is None else to_world,
+                  filter=filter)
+
+
+def cube_to_world(lo, hi):
+    """to_world mapping the unit cube onto the box [lo, hi]."""
+    lo, hi = np.asarray(lo, float) * np.ones(3), np.asarray(hi, float) * np.ones(3)
+    m = np.diag(np.r_[hi - lo, 1.0])
+    m[:3, 3] = lo
+    return m
+
+
+def hetero_medium(sigma_t, albedo, g=0.0, scale=1.0, radiance=None):
+    """A heterogeneous medium; sigma_t and albedo: Volume objects, or colours (constant volumes)."""
+    def vol(v):
+        return v if isinstance(v, Volume) else Volume("const", value=rgb(v))
+    phase = Phase("hg", g) if g != 0 else Phase("isotropic")
+    return Medium("heterogeneous", sigma_t=vol(sigma_t), albedo=vol(albedo), scale=scale, phase=phase,
                   radiance=None if radiance is None else rgb(radiance))
 
 

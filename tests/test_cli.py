@@ -38,7 +38,8 @@ def test_render_png_and_exr_with_metadata(tmp_path):
     assert "spheres" in attrs["volcl:features"]
     meta = {k.split(":", 1)[1]: v for k, v in attrs.items() if k.startswith("volcl:")}
     assert set(meta) == {"scene", "scene_sha256", "defines", "spp", "spp_requested", "complete", "seed",
-                         "device", "features", "kernel_sha256", "render_seconds", "version", "invalid_samples"}
+                         "device", "features", "kernel_sha256", "render_seconds", "version", "invalid_samples",
+                         "tracking_cutoffs"}
     assert meta["scene"] == str(ROOT / "scenes" / "cbox.xml") and meta["version"] == volcl_version
     assert meta["scene_sha256"] == hashlib.sha256((ROOT / "scenes" / "cbox.xml").read_bytes()).hexdigest()
     assert meta["spp_requested"] == 3 and meta["complete"] == 1 and meta["render_seconds"] > 0
@@ -147,3 +148,19 @@ def test_invalid_samples_are_reported_in_summary_and_metadata(tmp_path):
     assert 0 < count <= 8 * 6 * 4
     assert f"invalid samples {count}," in r.stdout
     assert np.isfinite(img).all(), "invalid samples must be left out of the image"
+
+
+def test_render_grid_scene_reports_tracking_cutoffs(tmp_path):
+    """The smoke scene (a heterogeneous medium): the summary line and the EXR carry the number of
+    tracking cut-offs, zero here."""
+    exr = tmp_path / "smoke.exr"
+    r = volcl("render", "scenes/smoke_grid.xml", "-o", exr, "--spp", 2, "--width", 24, "--height", 24, "-q")
+    assert r.returncode == 0, r.stderr
+    assert "tracking cut-offs 0" in r.stdout
+    img, attrs = read_image(exr)
+    assert attrs["volcl:tracking_cutoffs"] == 0 and attrs["volcl:invalid_samples"] == 0
+    assert "grid_media" in attrs["volcl:features"]
+    r = volcl("info", "scenes/smoke_grid.xml", "--no-build")
+    assert r.returncode == 0, r.stderr
+    assert "heterogeneous (48x48x48 grid, 1 channel, trilinear)" in r.stdout
+    assert "VOLCL_HAS_GRID_MEDIA=1" in r.stdout

@@ -41,11 +41,11 @@ def test_scene_above_the_largest_allocation(device):
 
 def test_scene_above_global_memory(device):
     sc = furnace(0.5)
-    sc.camera.width, sc.camera.height = 4096, 4096       # accumulators: 36 bytes per pixel
+    sc.camera.width, sc.camera.height = 4096, 4096       # accumulators: 40 bytes per pixel
     with pytest.raises(VolclError) as info:
         Renderer(sc, device=_small_device(global_mem=64 << 20, max_alloc=64 << 20))
     message = str(info.value)
-    assert "image accumulators need 576.0 MiB" in message and "64.0 MiB (67108864 bytes) of global memory" in message
+    assert "image accumulators need 640.0 MiB" in message and "64.0 MiB (67108864 bytes) of global memory" in message
 
 
 def test_check_fits_names_the_buffer():

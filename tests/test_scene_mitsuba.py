@@ -271,3 +271,26 @@ def test_sphere_defaults_and_uniform_scale(tmp_path):
     assert np.allclose(a.center, 0) and a.radius == 1.0
     assert np.allclose(b.center, [1, 0, 0]) and b.radius == pytest.approx(6.0)
 
+
+
+def test_heterogeneous_medium_with_constant_sigma_t_warns_and_keeps_to_world(tmp_path):
+    """Mitsuba 3 bounds such a medium by the constant volume's unit cube (after its to_world); volcl
+    renders the same and says so."""
+    body = SENSOR + ('<shape type="sphere"><medium type="heterogeneous" name="interior">\n'
+                     '<volume type="constvolume" name="sigma_t"><float name="value" value="2"/>'
+                     '<transform name="to_world"><scale value="3"/></transform></volume>'
+                     '</medium></shape>')
+    s = scene(tmp_path, body)
+    sigma_t = s.shapes[0].interior.sigma_t
+    assert sigma_t.kind == "const" and np.allclose(sigma_t.value, 2)
+    assert np.allclose(sigma_t.to_world, tf.scale([3, 3, 3]))
+    (warning,) = [w for w in s.warnings if "constant 'sigma_t'" in w]
+    assert "scene.xml:2" in warning and "unit cube" in warning
+
+
+def test_shipped_smoke_scene_loads_its_grid():
+    s = load(Path(__file__).resolve().parent.parent / "scenes" / "smoke_grid.xml")
+    (smoke,) = s.media
+    assert smoke.kind == "heterogeneous" and smoke.sigma_t.kind == "grid"
+    assert smoke.sigma_t.data.shape == (48, 48, 48, 1) and smoke.sigma_t.filter == "trilinear"
+    assert s.warnings == []

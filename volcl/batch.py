@@ -231,7 +231,8 @@ def render_job(job: Job, opts, device, stop: StopRequest, load_scene, defines, f
                 "defines": ident["defines"], "spp": result.spp, "spp_requested": spp, "complete": int(complete),
                 "seed": renderer.seed, "device": result.device, "features": result.stats["features"],
                 "kernel_sha256": ident["kernel_sha256"], "render_seconds": round(result.seconds, 3),
-                "version": __version__, "invalid_samples": result.invalid}
+                "version": __version__, "invalid_samples": result.invalid,
+                "tracking_cutoffs": result.tracking_cutoffs}
     layers = {"variance": result.variance} if out.suffix.lower() == ".exr" else None
     write_image(out, result.image, meta_out, layers)
     if complete and not opts.keep_checkpoint and ckpt.is_file():
@@ -244,8 +245,8 @@ def render_job(job: Job, opts, device, stop: StopRequest, load_scene, defines, f
         kept = f" and {ckpt} (continue with --resume)" if interval is not None else ""
         print(f"volcl: interrupted after {result.spp} spp; wrote {out}{kept}", file=sys.stderr, flush=True)
     print(f"{out}: {result.spp} spp in {result.seconds:.2f} s, {result.samples_per_second / 1e6:.2f} M samples/s, "
-          f"invalid samples {result.invalid}, device {result.device}, features {result.stats['features']}",
-          flush=True)
+          f"invalid samples {result.invalid}, tracking cut-offs {result.tracking_cutoffs}, device {result.device}, "
+          f"features {result.stats['features']}", flush=True)
 
 
 def print_table(jobs: list[Job], file=sys.stdout):

@@ -31,7 +31,7 @@ from .program import sources_hash
 
 FORMAT = 1
 SUFFIX = ".checkpoint.npz"
-ARRAYS = ("sums", "sums_sq", "invalid")
+ARRAYS = ("sums", "sums_sq", "invalid", "cutoffs")
 
 # identity keys, in the order a mismatch is reported, with what to say about each
 IDENTITY = {

@@ -74,6 +74,13 @@ def cmd_devices(args):
     return 0
 
 
+def _grid_text(volume):
+    if volume.kind != "grid":
+        return "constant extinction"
+    z, y, x, c = volume.data.shape
+    return f"{x}x{y}x{z} grid, {c} channel{'s' if c > 1 else ''}, {volume.filter}"
+
+
 def cmd_info(args):
     from .features import FLAGS, describe, detect
     from .pack import pack
@@ -87,7 +94,8 @@ def cmd_info(args):
     print(f"shapes     {len(scene.shapes)} ({packed.triangle_count} triangles, {packed.sphere_count} spheres)")
     kinds = ["area"] * sum(s.emitter_radiance is not None for s in scene.shapes) + [e.kind for e in scene.emitters]
     print(f"emitters   {len(kinds)}" + (f" ({', '.join(kinds)})" if kinds else ""))
-    print(f"media      {len(scene.media)}")
+    media_kinds = [m.kind + (f" ({_grid_text(m.sigma_t)})" if m.kind == "heterogeneous" else "") for m in scene.media]
+    print(f"media      {len(scene.media)}" + (f": {', '.join(media_kinds)}" if media_kinds else ""))
     print(f"features   {describe(feats)}")
     print("flags      " + " ".join(f"VOLCL_HAS_{n}={int(feats[n])}" for n in FLAGS))
     if not args.no_build:

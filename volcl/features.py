@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .scene.model import Scene
+from .scene.model import Scene, Volume
 
 FLAGS = (
     "SPHERES",              # analytic sphere primitives
@@ -20,11 +20,23 @@ FLAGS = (
     "CHROMATIC_MEDIA",      # a medium whose extinction differs between colour channels
     "HG",                   # an anisotropic (Henyey-Greenstein) phase function
     "EMISSIVE_MEDIA",       # a medium that emits light
+    "GRID_MEDIA",           # a heterogeneous medium: grid lookups, delta and ratio tracking
 )
 
 
 def _media_of(scene: Scene):
     return list(scene.media)
+
+
+def _chromatic(sigma_t) -> bool:
+    """Whether an extinction (rgb array, or a Volume of a heterogeneous medium) differs between
+    colour channels somewhere."""
+    if isinstance(sigma_t, Volume):
+        if sigma_t.kind == "const":
+            return bool(np.ptp(sigma_t.value) > 0)
+        data = sigma_t.data
+        return data.shape[-1] == 3 and bool(np.any(data.max(axis=-1) != data.min(axis=-1)))
+    return bool(np.ptp(np.asarray(sigma_t, dtype=float)) > 0)
 
 
 def detect(scene: Scene) -> dict[str, bool]:
@@ -45,9 +57,10 @@ def detect(scene: Scene) -> dict[str, bool]:
     f["ENV_LIGHTS"] = "constant" in light_kinds
     f["MEDIA"] = bool(media)
     f["MEDIUM_BOUNDARIES"] = any(s.interior is not None or s.exterior is not None for s in scene.shapes)
-    f["CHROMATIC_MEDIA"] = any(np.ptp(np.asarray(m.sigma_t, dtype=float)) > 0 for m in media)
+    f["CHROMATIC_MEDIA"] = any(_chromatic(m.sigma_t) for m in media)
     f["HG"] = any(m.phase.kind == "hg" for m in media)
     f["EMISSIVE_MEDIA"] = any(m.radiance is not None and np.any(np.asarray(m.radiance) > 0) for m in media)
+    f["GRID_MEDIA"] = any(m.kind == "heterogeneous" for m in media)
     return f
 
 

@@ -50,13 +50,24 @@ LIGHT = np.dtype([
     ("direction", *f3), ("pad1", np.float32),
 ])
 
-MEDIUM_TYPES = {"homogeneous": 0}
+MEDIUM_TYPES = {"homogeneous": 0, "heterogeneous": 1}
 PHASE_TYPES = {"isotropic": 0, "hg": 1}
+# Heterogeneous media name their grids (sigma_t_grid, albedo_grid), and `emission` holds the
+# radiance; homogeneous media use sigma_t, albedo, and emission = sigma_a * radiance.
 MEDIUM = np.dtype([
-    ("type", np.int32), ("phase", np.int32), ("g", np.float32), ("pad0", np.int32),
-    ("sigma_t", *f3), ("pad1", np.float32),
+    ("type", np.int32), ("phase", np.int32), ("g", np.float32), ("sigma_t_grid", np.int32),
+    ("sigma_t", *f3), ("albedo_grid", np.int32),
     ("albedo", *f3), ("pad2", np.float32),
     ("emission", *f3), ("pad3", np.float32),
+])
+
+GRID_FILTERS = {"trilinear": 0, "nearest": 1}
+# A grid of 1 or 3 channels filling its unit cube; voxels and majorant cells live in one float
+# buffer at offsets `data` and `majorants` (see kernels/types.h).
+GRID_VOLUME = np.dtype([
+    ("to_local", np.float32, 12), ("res", np.int32, 3), ("channels", np.int32),
+    ("maj_res", np.int32, 3), ("filter", np.int32),
+    ("data", np.int32), ("majorants", np.int32), ("pad0", np.int32, 2),
 ])
 
 RENDER_PARAMS = np.dtype([
@@ -66,11 +77,13 @@ RENDER_PARAMS = np.dtype([
     ("hide_emitters", np.int32), ("specular_chains_only", np.int32), ("camera_medium", np.int32),
     ("light_count", np.int32), ("env_light", np.int32), ("filter_size", np.int32),
     ("filter_radius", np.float32), ("seed", np.uint32), ("scene_radius", np.float32),
-    ("scene_center", *f3), ("nee", np.int32), ("mis", np.int32), ("pad0", np.int32, 2),
+    ("scene_center", *f3), ("nee", np.int32), ("mis", np.int32), ("majorant_scale", np.float32),
+    ("pad0", np.int32),
 ])
 
 # name in kernels/types.h -> dtype, for the layout probe
 SHARED_STRUCTS = {
     "BvhNode": BVH_NODE, "Triangle": TRIANGLE, "TriangleNormals": TRIANGLE_NORMALS, "Sphere": SPHERE,
-    "ShapeInfo": SHAPE_INFO, "Bsdf": BSDF, "Light": LIGHT, "Medium": MEDIUM, "RenderParams": RENDER_PARAMS,
+    "ShapeInfo": SHAPE_INFO, "Bsdf": BSDF, "Light": LIGHT, "Medium": MEDIUM, "GridVolume": GRID_VOLUME,
+    "RenderParams": RENDER_PARAMS,
 }

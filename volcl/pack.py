@@ -13,6 +13,7 @@ import numpy as np
 from . import layout
 from .bvh import build_bvh
 from .features import detect
+from .grids import GridPacker
 from .mesh import triangle_areas32
 from .scene.model import Camera, Filter, Scene
 
@@ -56,13 +57,21 @@ def _pack_bsdfs(bsdfs):
     return arr
 
 
-def _pack_media(media):
+def _pack_media(media, grids: GridPacker):
     arr = np.zeros(max(len(media), 1), layout.MEDIUM)
+    arr["sigma_t_grid"] = arr["albedo_grid"] = -1
     for i, m in enumerate(media):
         r = arr[i]
         r["type"] = layout.MEDIUM_TYPES[m.kind]
         r["phase"] = layout.PHASE_TYPES[m.phase.kind]
         r["g"] = m.phase.g if m.phase.kind == "hg" else 0.0
+        if m.kind == "heterogeneous":
+            # the scale goes into the grid values (and so into the majorants) once, here
+            r["sigma_t_grid"] = grids.add(m.sigma_t, m.scale, tracked=True)
+            r["albedo_grid"] = grids.add(m.albedo)
+            if m.radiance is not None:
+                r["emission"] = m.radiance
+            continue
         sigma_t = np.asarray(m.sigma_t, dtype=np.float64) * m.scale
         albedo = np.asarray(m.albedo, dtype=np.float64)
         r["sigma_t"], r["albedo"] = sigma_t, albedo
@@ -131,7 +140,12 @@ def camera_tangents(cam: Camera) -> tuple[float, float]:
     return tx, tx * h / w
 
 
-def pack(scene: Scene, features: dict | None = None, max_leaf: int = 4) -> Packed:
+def pack(scene: Scene, features: dict | None = None, max_leaf: int = 4, majorant_cells: int | None = None,
+         majorant_scale: float = 1.0) -> Packed:
+    """The scene as kernel arrays. majorant_cells: majorant cells per axis of every extinction grid
+    (default: about one per MAJORANT_CELL_VOXELS voxels; 1 = a single global majorant);
+    majorant_scale (>= 1) multiplies every majorant on the device, a test knob that must not change
+    the expected image."""
     import time
     shape_index = {id(s): i for i, s in enumerate(scene.shapes)}
     bsdf_index, bsdfs = _index_by_identity(s.bsdf for s in scene.shapes)
@@ -243,6 +257,10 @@ def pack(scene: Scene, features: dict | None = None, max_leaf: int = 4) -> Packe
         bounds_lo = bounds_hi = np.zeros(3)
     bvh_seconds = time.perf_counter() - t0
 
+    grids = GridPacker(majorant_cells)
+    media_arr = _pack_media(media, grids)
+    grid_desc, grid_data = grids.arrays()
+
     cam = scene.camera
     params = np.zeros((), layout.RENDER_PARAMS)
     m = np.asarray(cam.to_world, np.float64)
@@ -262,6 +280,7 @@ def pack(scene: Scene, features: dict | None = None, max_leaf: int = 4) -> Packe
     params["filter_radius"] = cam.rfilter.radius
     params["seed"] = scene.seed & 0xFFFFFFFF
     params["nee"], params["mis"] = 1, 1
+    params["majorant_scale"] = majorant_scale
     center = 0.5 * (bounds_lo + bounds_hi)
     params["scene_center"] = center
     params["scene_radius"] = 0.5 * float(np.linalg.norm(bounds_hi - bounds_lo))
@@ -271,9 +290,10 @@ def pack(scene: Scene, features: dict | None = None, max_leaf: int = 4) -> Packe
         "shapes": shape_arr, "bsdfs": _pack_bsdfs(bsdfs), "lights": light_arr,
         "light_tri_cdf": np.asarray(light_cdf or [1.0], np.float32),
         "light_tris": np.asarray(light_tris or [0], np.int32),
-        "media": _pack_media(media),
+        "media": media_arr, "grids": grid_desc, "grid_data": grid_data,
         "params": params.reshape(1),
         "filter_table": filter_table(cam.rfilter),
     }
     feats = features if features is not None else detect(scene)
-    return Packed(arrays, params, feats, ntri, len(sphere_shapes), bvh_seconds)
+    stats = {"grid_voxels": grids.voxels, "majorant_cells": grids.majorant_count}
+    return Packed(arrays, params, feats, ntri, len(sphere_shapes), bvh_seconds, stats)

@@ -45,6 +45,9 @@ class RenderResult:
     features: dict
     build_seconds: float
     stats: dict = field(default_factory=dict)
+    # medium segments whose delta / ratio tracking hit its step bound and was cut short (each a
+    # biased estimate; never happens in ordinary scenes, see kernels/media.h)
+    tracking_cutoffs: int = 0
 
     @property
     def samples_per_second(self) -> float:
@@ -61,18 +64,18 @@ class Renderer:
     """
 
     ARG_ORDER = ("nodes", "prim_ids", "triangles", "normals", "spheres", "shapes", "bsdfs", "lights",
-                 "light_tri_cdf", "light_tris", "media", "params", "filter_table")
+                 "light_tri_cdf", "light_tris", "media", "grids", "grid_data", "params", "filter_table")
 
     def __init__(self, scene: Scene, device: devmod.DeviceInfo | None = None, features: dict | None = None,
                  seed: int | None = None, slots: int | None = None, tile: int | None = None,
-                 launch_seconds=_DEFAULT):
+                 launch_seconds=_DEFAULT, majorant_cells: int | None = None, majorant_scale: float = 1.0):
         self.scene = scene
         self.device = device or devmod.choose()
-        self.packed = pack(scene, features)
+        self.packed = pack(scene, features, majorant_cells=majorant_cells, majorant_scale=majorant_scale)
         # a scene too large for the device is the user's to fix: say so before uploading anything
-        # (accumulators: sums, sums_sq, invalid for at least MIN_ITEMS slots, see below)
+        # (accumulators: sums, sums_sq, invalid, cutoffs for at least MIN_ITEMS slots, see below)
         devmod.check_fits(self.device, {name: self.packed.arrays[name].nbytes for name in self.ARG_ORDER},
-                          accumulator_bytes=36 * max(scene.camera.width * scene.camera.height, MIN_ITEMS))
+                          accumulator_bytes=40 * max(scene.camera.width * scene.camera.height, MIN_ITEMS))
         if seed is not None:
             self.packed.arrays["params"]["seed"] = seed & 0xFFFFFFFF
         self.seed = int(self.packed.arrays["params"]["seed"][0])
@@ -106,10 +109,11 @@ class Renderer:
         self.sums = cl.Buffer(self.ctx, mf.READ_WRITE, 16 * n)
         self.sums_sq = cl.Buffer(self.ctx, mf.READ_WRITE, 16 * n)
         self.invalid = cl.Buffer(self.ctx, mf.READ_WRITE, 4 * n)
+        self.cutoffs = cl.Buffer(self.ctx, mf.READ_WRITE, 4 * n)
         self.reset()
 
     def reset(self):
-        for buf in (self.sums, self.sums_sq, self.invalid):
+        for buf in (self.sums, self.sums_sq, self.invalid, self.cutoffs):
             cl.enqueue_fill_buffer(self.queue, buf, np.zeros(1, np.float32), 0, buf.size)
         self.samples_done = 0
         self.seconds = 0.0
@@ -156,14 +160,14 @@ class Renderer:
         first_slot = done % self.slots
         assert first_slot + count <= self.slots
         if first_slot == 0:
-            self._launch(done, count, (self.sums, self.sums_sq, self.invalid))
+            self._launch(done, count, (self.sums, self.sums_sq, self.invalid, self.cutoffs))
             return
         # Slots first_slot.. of the accumulators: the kernel writes slots from 0, so those rows go
         # through scratch buffers and back; the kernel does the same float operations on the same
         # values as it would in place.
         n = count * self.npix
         mf = cl.mem_flags
-        rows = [(self.sums, 16), (self.sums_sq, 16), (self.invalid, 4)]
+        rows = [(self.sums, 16), (self.sums_sq, 16), (self.invalid, 4), (self.cutoffs, 4)]
         scratch = [cl.Buffer(self.ctx, mf.READ_WRITE, size * n) for _, size in rows]
         for (buf, size), tmp in zip(rows, scratch):
             cl.enqueue_copy(self.queue, tmp, buf, src_offset=size * first_slot * self.npix, byte_count=size * n)
@@ -199,13 +203,15 @@ class Renderer:
         sums = np.empty((n, 4), np.float32)
         sums_sq = np.empty((n, 4), np.float32)
         invalid = np.empty(n, np.uint32)
+        cutoffs = np.empty(n, np.uint32)
         cl.enqueue_copy(self.queue, sums, self.sums)
         cl.enqueue_copy(self.queue, sums_sq, self.sums_sq)
         cl.enqueue_copy(self.queue, invalid, self.invalid)
+        cl.enqueue_copy(self.queue, cutoffs, self.cutoffs)
         self.queue.finish()
-        return {"sums": sums, "sums_sq": sums_sq, "invalid": invalid, "samples_done": self.samples_done,
-                "seconds": self.seconds, "slots": self.slots, "width": self.width, "height": self.height,
-                "seed": self.seed}
+        return {"sums": sums, "sums_sq": sums_sq, "invalid": invalid, "cutoffs": cutoffs,
+                "samples_done": self.samples_done, "seconds": self.seconds, "slots": self.slots,
+                "width": self.width, "height": self.height, "seed": self.seed}
 
     def restore(self, state: dict):
         """Continue from state() of a renderer of the same scene, seed and image size."""
@@ -214,7 +220,7 @@ class Renderer:
                 raise ValueError(f"state has {key} {int(state[key])}, this renderer {getattr(self, key)}")
         n = self.slots * self.npix
         arrays = [(self.sums, "sums", np.float32, (n, 4)), (self.sums_sq, "sums_sq", np.float32, (n, 4)),
-                  (self.invalid, "invalid", np.uint32, (n,))]
+                  (self.invalid, "invalid", np.uint32, (n,)), (self.cutoffs, "cutoffs", np.uint32, (n,))]
         for buf, key, dtype, shape in arrays:
             a = np.ascontiguousarray(state[key])
             if a.dtype != dtype or a.shape != shape:
@@ -238,12 +244,14 @@ class Renderer:
             image=mean.reshape(shape).astype(np.float32), variance=var_mean.reshape(shape).astype(np.float32),
             spp=self.samples_done, invalid=int(st["invalid"].sum()), seconds=self.seconds,
             device=f"{self.device.key} {self.device.name}", features=self.packed.features,
-            build_seconds=self.build_seconds,
+            build_seconds=self.build_seconds, tracking_cutoffs=int(st["cutoffs"].sum(dtype=np.uint64)),
             stats={"triangles": self.packed.triangle_count, "spheres": self.packed.sphere_count,
-                   "bvh_seconds": self.packed.bvh_seconds, "features": describe(self.packed.features)})
+                   "bvh_seconds": self.packed.bvh_seconds, "features": describe(self.packed.features),
+                   **self.packed.stats})
 
 
 def render(scene: Scene, spp: int | None = None, device=None, features=None, seed=None, progress=None,
-           time_limit=None) -> RenderResult:
-    r = Renderer(scene, device=device, features=features, seed=seed)
+           time_limit=None, majorant_cells=None, majorant_scale=1.0) -> RenderResult:
+    r = Renderer(scene, device=device, features=features, seed=seed, majorant_cells=majorant_cells,
+                 majorant_scale=majorant_scale)
     return r.render(spp if spp is not None else scene.spp, progress=progress, time_limit=time_limit)

@@ -70,7 +70,7 @@ SPECS = {
     },
     "volume": {
         "gridvolume": Spec({"filename": "string", "filter_type": "string", **_TO_WORLD}),
-        "constvolume": Spec({"value": "color"}),
+        "constvolume": Spec({"value": "color", **_TO_WORLD}),
     },
     "phase": {"isotropic": Spec(), "hg": Spec({"g": "float"})},
 }
@@ -345,6 +345,12 @@ def build_medium(node: Node) -> Medium:
         volumes = _named_volumes(node)
         sigma_t = _volume_param(node, volumes, "sigma_t", 1.0, upper=None)
         albedo = _volume_param(node, volumes, "albedo", 0.75, upper=1.0)
+        if sigma_t.kind == "const":
+            # Mitsuba 3 bounds a heterogeneous medium by its sigma_t volume's box, the unit cube
+            # before to_world, even for a constant; volcl renders the same image
+            node.ctx.warn(node.element, "a heterogeneous medium with a constant 'sigma_t' has that "
+                                        "density only inside the volume's unit cube [0,1]^3 (after its "
+                                        "to_world), as in Mitsuba 3; a homogeneous medium fills its shape")
     medium = Medium(kind=node.type, sigma_t=sigma_t, albedo=albedo,
                     scale=node.positive("scale", 1.0), phase=phase.obj if phase else Phase(),
                     radiance=node.nonneg_color("volcl_radiance") if node.has("volcl_radiance")
@@ -377,7 +383,7 @@ def _volume_param(node: Node, volumes: dict, name: str, default: float, upper) -
 
 def build_volume(node: Node) -> Volume:
     if node.type == "constvolume":
-        return Volume("const", value=node.color("value", 1.0))
+        return Volume("const", value=node.color("value", 1.0), to_world=node.transform("to_world"))
     data, path = objects.grid_from_file(node, "filename")
     return Volume("grid", value=rgb(0.0), data=data, to_world=node.transform("to_world"),
                   filter=node.choice("filter_type", ("trilinear", "nearest"), "trilinear"),

@@ -1,0 +1,64 @@
+/* Test-only kernels for grid volumes: lookups at given points, and the tracking routines the
+ * integrator uses (free flights by delta tracking, shadow-ray transmittance by ratio tracking) on
+ * given rays, one estimate per work item. The scene buffers come in Renderer.ARG_ORDER. */
+#include "types.h"
+#include "common.h"
+#include "rng.h"
+#include "sampling.h"
+#include "scene.h"
+#include "bvh.h"
+#include "surface.h"
+#include "bsdf.h"
+#include "phase.h"
+#include "grid.h"
+#include "media.h"
+#include "lights.h"
+#include "integrator.h"
+
+#define SCENE_ARGS                                                                                      \
+    __global const BvhNode *nodes, __global const int *prim_ids, __global const Triangle *triangles,   \
+    __global const TriangleNormals *normals, __global const Sphere *spheres,                            \
+    __global const ShapeInfo *shapes, __global const Bsdf *bsdfs, __global const Light *lights,         \
+    __global const float *light_tri_cdf, __global const int *light_tris, __global const Medium *media,  \
+    __global const GridVolume *grids, __global const float *grid_data,                                  \
+    __global const RenderParams *params, __global const float *filter_table
+#define SCENE_INIT {nodes, prim_ids, triangles, normals, spheres, shapes, bsdfs, lights, light_tri_cdf, \
+                    light_tris, media, grids, grid_data, params}
+
+/* grid_lookup of descriptor `grid` at local points (3 floats each). */
+__kernel void lookups(__global const GridVolume *grids, __global const float *grid_data,
+                      __global const float *points, __global float *out, int grid) {
+    int i = get_global_id(0);
+    vstore3(grid_lookup(grid_data, &grids[grid], vload3(i, points)), i, out);
+}
+
+/* Work item i: ray i % nrays (o, d, t_max as 7 floats), estimate number i / nrays. */
+__kernel void shadow_rays(SCENE_ARGS, __global const float *rays, __global float *out, __global uint *cutoffs,
+                          int nrays, int medium, uint seed) {
+    int i = get_global_id(0);
+    SceneData sc = SCENE_INIT;
+    __global const float *r = rays + 7 * (i % nrays);
+    Rng rng = rng_init(seed, (uint)(i % nrays), (uint)(i / nrays));
+    uint cut = 0u;
+    float3 tr = shadow_transmittance(&sc, vload3(0, r), vload3(1, r), r[6], medium, &rng, &cut);
+    vstore3(tr, i, out);
+    cutoffs[i] = cut;
+}
+
+/* Free flights with path weight (1, 1, 1): out = t, scattered, weight.xyz per work item. */
+__kernel void free_flights(SCENE_ARGS, __global const float *rays, __global float *out, __global uint *cutoffs,
+                           int nrays, int medium, uint seed) {
+    int i = get_global_id(0);
+    SceneData sc = SCENE_INIT;
+    __global const float *r = rays + 7 * (i % nrays);
+    Rng rng = rng_init(seed, (uint)(i % nrays), (uint)(i / nrays));
+    uint cut = 0u;
+    MediumSample ms = medium_sample(&sc, &media[medium], vload3(0, r), vload3(1, r), r[6], (float3)(1.0f),
+                                    &rng, &cut);
+    out[5 * i] = ms.t;
+    out[5 * i + 1] = ms.scattered ? 1.0f : 0.0f;
+    out[5 * i + 2] = ms.weight.x;
+    out[5 * i + 3] = ms.weight.y;
+    out[5 * i + 4] = ms.weight.z;
+    cutoffs[i] = cut;
+}
