@@ -16,6 +16,7 @@
 #include "phase.h"
 #include "media.h"
 #include "lights.h"
+#include "equiangular.h"
 #include "camera.h"
 #include "integrator.h"
 

@@ -66,7 +66,8 @@ RENDER_PARAMS = np.dtype([
     ("hide_emitters", np.int32), ("specular_chains_only", np.int32), ("camera_medium", np.int32),
     ("light_count", np.int32), ("env_light", np.int32), ("filter_size", np.int32),
     ("filter_radius", np.float32), ("seed", np.uint32), ("scene_radius", np.float32),
-    ("scene_center", *f3), ("nee", np.int32), ("mis", np.int32), ("pad0", np.int32, 2),
+    ("scene_center", *f3), ("nee", np.int32), ("mis", np.int32), ("equiangular", np.int32),
+    ("pad0", np.int32),
 ])
 
 # name in kernels/types.h -> dtype, for the layout probe

@@ -2,13 +2,16 @@
 accumulate on the device, and read back the mean image with its per-pixel variance."""
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from . import device as devmod
+from .accuracy import relative_standard_error
 from .device import cl
+from .estimator import Estimator
 from .features import describe
 from .pack import pack
 from .program import build_program, build_seconds
@@ -17,6 +20,9 @@ from .scene.model import Scene
 # Work items per launch: enough to fill a device, small enough to keep a launch short.
 MIN_ITEMS = 1 << 14
 MAX_ITEMS = 1 << 19
+# Samples per pixel before a target error is trusted: with fewer, a pixel whose rare bright paths
+# have not turned up yet reports a small variance along with its small mean (README, "Accuracy").
+MIN_SPP_FOR_ERROR = 16
 
 
 @dataclass
@@ -30,6 +36,12 @@ class RenderResult:
     features: dict
     build_seconds: float
     stats: dict = field(default_factory=dict)
+    stop_reason: str = "spp"    # the rule that ended the render: 'spp', 'time' or 'error'
+
+    @property
+    def rel_error(self) -> float:
+        """The image's estimated relative standard error (volcl.accuracy.relative_standard_error)."""
+        return relative_standard_error(self.image, self.variance)
 
     @property
     def samples_per_second(self) -> float:
@@ -44,10 +56,14 @@ class Renderer:
                  "light_tri_cdf", "light_tris", "media", "params", "filter_table")
 
     def __init__(self, scene: Scene, device: devmod.DeviceInfo | None = None, features: dict | None = None,
-                 seed: int | None = None):
+                 seed: int | None = None, estimator: Estimator | None = None):
         self.scene = scene
         self.device = device or devmod.choose()
+        self.estimator = estimator or Estimator()
+        features, estimator_params = self.estimator.resolve(scene, features)
         self.packed = pack(scene, features)
+        for name, value in estimator_params.items():
+            self.packed.arrays["params"][name] = value
         if seed is not None:
             self.packed.arrays["params"]["seed"] = seed & 0xFFFFFFFF
         self.seed = int(self.packed.arrays["params"]["seed"][0])
@@ -84,22 +100,40 @@ class Renderer:
                                  np.uint32(sample_base), np.int32(first), np.int32(count), np.int32(slots))
             cl.enqueue_nd_range_kernel(self.queue, self.kernel, (count * slots,), None)
 
-    def render(self, spp: int, progress=None, time_limit: float | None = None) -> RenderResult:
-        """Add `spp` samples per pixel (fewer if time_limit seconds pass first) and return the image
-        of everything accumulated so far."""
-        target = self.samples_done + spp
+    def render(self, spp: int | None = None, progress=None, time_limit: float | None = None,
+               target_error: float | None = None, min_spp: int = MIN_SPP_FOR_ERROR) -> RenderResult:
+        """Add samples per pixel until the first of the given rules is met, and return the image of
+        everything accumulated so far:
+          spp           this many more samples per pixel;
+          time_limit    this many seconds spent in this call;
+          target_error  the image's estimated relative standard error (RenderResult.rel_error) at
+                        or below this, checked between passes once min_spp samples are in.
+        With none of them, the scene's own spp. RenderResult.stop_reason names the rule that ended it."""
+        if spp is None and time_limit is None and target_error is None:
+            spp = self.scene.spp
+        target = None if spp is None else self.samples_done + spp
+        check = None if target_error is None else _ErrorCheck(target_error, max(min_spp, 1))
+        reason = "spp"
         t0 = time.perf_counter()
-        while self.samples_done < target:
-            slots = min(self.slots, target - self.samples_done)
+        while target is None or self.samples_done < target:
+            slots = self.slots if target is None else min(self.slots, target - self.samples_done)
+            if check is not None:
+                slots = max(1, min(slots, check.next_at - self.samples_done))
             self._launch(self.samples_done, slots)
             self.queue.finish()
             self.samples_done += slots
             if progress is not None:
                 progress(slots)
             if time_limit is not None and time.perf_counter() - t0 >= time_limit:
+                reason = "time"
+                break
+            if check is not None and self.samples_done >= check.next_at and check.reached(self):
+                reason = "error"
                 break
         self.seconds += time.perf_counter() - t0
-        return self.result()
+        result = self.result()
+        result.stop_reason = reason
+        return result
 
     def result(self) -> RenderResult:
         n = self.slots * self.npix
@@ -126,7 +160,30 @@ class Renderer:
                    "bvh_seconds": self.packed.bvh_seconds, "features": describe(self.packed.features)})
 
 
+class _ErrorCheck:
+    """When to read the image back to test a target error. Each check predicts, from the error's
+    1/sqrt(spp) fall, the spp at which the target will be met and checks next there (at least 5%
+    and at most 100% more samples later), so a render overshoots its target by little and spends
+    few read-backs."""
+
+    def __init__(self, target: float, min_spp: int):
+        self.target = target
+        self.next_at = min_spp
+        self.last = math.inf
+
+    def reached(self, renderer: "Renderer") -> bool:
+        n = renderer.samples_done
+        self.last = renderer.result().rel_error
+        if self.last <= self.target:
+            return True
+        wanted = n * (self.last / self.target) ** 2 if math.isfinite(self.last) else 2 * n
+        self.next_at = int(math.ceil(min(max(wanted, 1.05 * n, n + 1), 2 * n)))
+        return False
+
+
 def render(scene: Scene, spp: int | None = None, device=None, features=None, seed=None, progress=None,
-           time_limit=None) -> RenderResult:
-    r = Renderer(scene, device=device, features=features, seed=seed)
-    return r.render(spp if spp is not None else scene.spp, progress=progress, time_limit=time_limit)
+           time_limit=None, target_error=None, estimator: Estimator | None = None) -> RenderResult:
+    r = Renderer(scene, device=device, features=features, seed=seed, estimator=estimator)
+    if spp is None and time_limit is None and target_error is None:
+        spp = scene.spp
+    return r.render(spp, progress=progress, time_limit=time_limit, target_error=target_error)
