@@ -51,27 +51,60 @@ def _progress_bar(total, desc, quiet):
     return tqdm(total=total, desc=desc, unit="spp", disable=quiet, leave=False, file=sys.stderr)
 
 
+def _on_off(value):
+    return value == "on"
+
+
+def _estimator(args):
+    from .estimator import Estimator
+    return Estimator(nee=_on_off(args.nee), mis=_on_off(args.mis), equiangular=args.equiangular,
+                     equiangular_mis=args.equiangular_mis)
+
+
+def _stopping(args, scene):
+    """(spp, time_limit, target_error): --spp caps the others; with neither --time-limit nor
+    --target-error the scene's own spp applies."""
+    if args.time_limit is not None and args.time_limit <= 0:
+        raise VolclError(f"--time-limit {args.time_limit}: expected a positive number of seconds")
+    if args.target_error is not None and not args.target_error > 0:
+        raise VolclError(f"--target-error {args.target_error}: expected a positive relative error, e.g. 0.02")
+    spp = args.spp
+    if spp is None and args.time_limit is None and args.target_error is None:
+        spp = scene.spp
+    return spp, args.time_limit, args.target_error
+
+
 def _render_one(path, out, args, device):
     from .image import write_image
     from .render import Renderer
     scene = _load(path, args)
-    spp = args.spp or scene.spp
-    renderer = Renderer(scene, device=device, features=_features(args), seed=args.seed)
+    spp, time_limit, target_error = _stopping(args, scene)
+    estimator = _estimator(args)
+    if not estimator.nee and any(e.kind in ("point", "directional") for e in scene.emitters):
+        print(f"warning: {path}: with --nee off, point and directional lights are never found (no path "
+              "can hit them)", file=sys.stderr)
+    renderer = Renderer(scene, device=device, features=_features(args), seed=args.seed, estimator=estimator)
     if args.verbose:
         print(f"{path}: {renderer.packed.triangle_count} triangles, {renderer.packed.sphere_count} spheres, "
               f"BVH {renderer.packed.bvh_seconds:.2f} s, kernel build {renderer.build_seconds:.2f} s",
               file=sys.stderr)
     with _progress_bar(spp, Path(path).name, args.quiet) as bar:
-        result = renderer.render(spp, progress=bar.update)
+        result = renderer.render(spp, progress=bar.update, time_limit=time_limit, target_error=target_error,
+                                 min_spp=args.min_spp)
     meta = {"scene": str(Path(path).resolve()), "spp": result.spp, "seed": renderer.seed,
             "device": result.device, "features": result.stats["features"],
             "render_seconds": round(result.seconds, 3), "version": __version__,
-            "invalid_samples": result.invalid}
+            "invalid_samples": result.invalid, "rel_error": float(result.rel_error),
+            "stop_reason": result.stop_reason, "estimator": estimator.describe()}
     layers = {"variance": result.variance} if Path(out).suffix.lower() == ".exr" else None
     write_image(out, result.image, meta, layers)
-    print(f"{out}: {result.spp} spp in {result.seconds:.2f} s, {result.samples_per_second / 1e6:.2f} M samples/s, "
+    print(f"{out}: {result.spp} spp in {result.seconds:.2f} s ({_STOPPED[result.stop_reason]}), "
+          f"{result.samples_per_second / 1e6:.2f} M samples/s, relative error {100 * result.rel_error:.2f}%, "
           f"invalid samples {result.invalid}, device {result.device}, features {result.stats['features']}")
     return result
+
+
+_STOPPED = {"spp": "spp reached", "time": "time limit reached", "error": "target error reached"}
 
 
 def cmd_render(args):
@@ -171,7 +204,25 @@ def cmd_test(args):
     return 1 if failed else 0
 
 
+def cmd_converge(args):
+    from . import device as devmod
+    from .converge import converge, markdown_table
+    scene = _load(args.scene, args)
+    if args.max_seconds <= 0:
+        raise VolclError(f"--max-seconds {args.max_seconds}: expected a positive number of seconds")
+    choices = [c.strip() for c in args.choices.split(",")] if args.choices else None
+    report = converge(scene, name=Path(args.scene).stem, reference=args.reference, out=args.out,
+                      max_seconds=args.max_seconds, reference_seconds=args.reference_seconds, choices=choices,
+                      seed=args.seed, device=devmod.choose(args.device), features=_features(args),
+                      quiet=args.quiet, clock=args.clock)
+    print(markdown_table(report))
+    for p in (report.csv_path, report.plot_path, report.table_path):
+        print(f"wrote {p}")
+    return 0
+
+
 def main(argv=None):
+    from .estimator import CHOICES
     p = argparse.ArgumentParser(prog="volcl", description="volcl: a volumetric path tracer on OpenCL")
     p.add_argument("--version", action="version", version=f"volcl {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
@@ -185,14 +236,51 @@ def main(argv=None):
         sp.add_argument("--features", help="'all': compile every feature instead of only the scene's")
         sp.add_argument("-v", "--verbose", action="store_true")
 
+    def estimator_opts(sp):
+        sp.add_argument("--nee", choices=("on", "off"), default="on",
+                        help="next-event estimation: sample lights at every vertex (default on)")
+        sp.add_argument("--mis", choices=("on", "off"), default="on",
+                        help="combine light sampling with BSDF / phase sampling by MIS (default on)")
+        sp.add_argument("--equiangular", choices=("auto", "on", "off"), default="auto",
+                        help="equiangular sampling towards point lights in media; auto: where a point "
+                             "light is inside a medium (default auto)")
+        sp.add_argument("--equiangular-mis", choices=("two", "one"), default="two",
+                        help="combine equiangular and distance samples by two-sample (default) or "
+                             "one-sample MIS")
+
     r = sub.add_parser("render", help="render one or more scenes")
     r.add_argument("scenes", nargs="+", metavar="SCENE")
     r.add_argument("-o", "--output", help="output file; .exr (linear float) or .png (sRGB)")
     r.add_argument("--spp", type=int, help="samples per pixel (default: the scene's sampler)")
     r.add_argument("--seed", type=int)
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--time-limit", type=float, metavar="SECONDS", help="stop after this much render time")
+    r.add_argument("--target-error", type=float, metavar="E",
+                   help="stop once the image's estimated relative error is at most E (e.g. 0.02)")
+    r.add_argument("--min-spp", type=int, default=16, metavar="N",
+                   help="samples per pixel before --target-error trusts the estimate (default 16)")
+    estimator_opts(r)
     scene_opts(r)
     r.set_defaults(func=cmd_render)
+
+    c = sub.add_parser("converge", help="error against render time for each estimator choice that applies")
+    c.add_argument("scene")
+    c.add_argument("--reference", metavar="REF.exr",
+                   help="reference image (default: rendered first, with the default estimator)")
+    c.add_argument("--out", default=".", metavar="DIR", help="folder for the CSV, plot and table (default .)")
+    c.add_argument("--max-seconds", type=float, default=20.0, metavar="S",
+                   help="render time per estimator choice (default 20)")
+    c.add_argument("--reference-seconds", type=float, metavar="S",
+                   help="render time of the reference when none is given (default 4 x --max-seconds)")
+    c.add_argument("--choices", help="comma-separated subset of: " + ", ".join(CHOICES)
+                   + " (default: those that apply to the scene)")
+    c.add_argument("--clock", choices=("cpu", "wall"), default="cpu",
+                   help="measure render cost as process CPU time (default; robust on a shared machine) "
+                        "or wall-clock time")
+    c.add_argument("--seed", type=int, default=1)
+    c.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    scene_opts(c)
+    c.set_defaults(func=cmd_converge)
 
     d = sub.add_parser("devices", help="list OpenCL devices and whether volcl's kernels build on them")
     d.set_defaults(func=cmd_devices)
