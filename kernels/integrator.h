@@ -9,6 +9,8 @@
 #ifndef VOLCL_INTEGRATOR_H
 #define VOLCL_INTEGRATOR_H
 
+#include "equiangular.h"   /* point lights in media (VOLCL_HAS_EQUIANGULAR) */
+
 /* Hard bound on loop iterations (vertices plus boundary crossings): Russian roulette ends paths long
  * before it (survival is capped at 0.95, so 1e-22 of paths reach 1000 vertices); it only stops
  * pathological scenes from spinning forever. */
@@ -113,6 +115,126 @@ inline float3 nee_contribution(const SceneData *sc, const LightSample *ls, float
     return f * ls->value * tr * (w / ls->pdf);
 }
 
+#if VOLCL_HAS_EQUIANGULAR
+/* Point lights in homogeneous media: equiangular sampling (equiangular.h) combined with free-flight
+ * distance sampling by multiple importance sampling.
+ *
+ * On a medium segment o + t d, t in [0, t_seg], that a path with throughput beta enters, the light of
+ * point light k scattered once towards the path is
+ *     D_k = integral over [0, t_seg] of Tr(t) sigma_s phase(t) Tr_shadow(t) I_k / dist_k(t)^2 dt.
+ * Two techniques estimate it:
+ *   - distance: the path's own free-flight sample t_d, density p_d (media.h; the mixture over colour
+ *     channels for chromatic extinction; it lands inside the segment only with probability
+ *     1 - Tr(t_seg), which p_d already accounts for), then next-event estimation picking light k;
+ *   - equiangular: light k picked as NEE picks lights (the pick probability is the same for both
+ *     techniques and cancels from the weights), then t_e with density p_e towards it.
+ * Two-sample MIS (EQUIANGULAR_TWO_SAMPLE) keeps one sample of each per segment, weighted by the
+ * power heuristic of p_e and p_d at the sample's own distance. One-sample MIS
+ * (EQUIANGULAR_ONE_SAMPLE, Cycles' arrangement) picks one technique per segment with probability
+ * 1/2 and doubles its power-heuristic weight; the other technique's sample gets weight 0. Either way
+ * the expected weights sum to one at every t, so the estimate stays unbiased; where p_e = 0 (outside
+ * equiangular.h's clipped interval, or on the light's line) distance sampling has weight 1 on
+ * average. With MIS off the equiangular sample alone covers D_k wherever p_e > 0 (weights 1 and 0).
+ * The path always continues from the distance sample; the equiangular vertex only sends a shadow
+ * ray. Media other than homogeneous keep distance sampling alone (their p_d is not available).
+ */
+
+/* which techniques estimate point-light direct light on a segment */
+#define EQ_NONE 0           /* distance sampling alone */
+#define EQ_BOTH 1
+#define EQ_ONLY_EQUIANGULAR 2
+#define EQ_ONLY_DISTANCE 3
+
+typedef struct {
+    int tech;
+    float3 o, d, beta;  /* the segment and the throughput entering it */
+    float t_seg;
+} EquiangularSegmentState;
+
+/* Density of the distance medium_sample_distance (media.h) draws for throughput beta, at t inside
+ * the segment; it mirrors that sampler's channel choice. Absolute (not relative to the smallest
+ * extinction): MIS compares it with p_e, and where it underflows p_e rightly takes all the weight. */
+inline float medium_distance_pdf(__global const Medium *m, float3 beta, float t) {
+    float3 sigma_t = vload_f3(m->sigma_t);
+#if VOLCL_HAS_CHROMATIC_MEDIA
+    float3 p = fmax(beta, 0.0f);
+    float total = p.x + p.y + p.z;
+    p = total > 0.0f ? p / total : (float3)(1.0f / 3.0f);
+    return dot(p, sigma_t * transmittance_exp(sigma_t, t));
+#else
+    return sigma_t.x * exp(-sigma_t.x * t);
+#endif
+}
+
+inline float equiangular_weight(int tech, int mis, float pdf_e, float pdf_d) {
+    if (tech == EQ_ONLY_EQUIANGULAR) return 2.0f * power_heuristic(pdf_e, pdf_d);
+    return mis ? power_heuristic(pdf_e, pdf_d) : 1.0f;
+}
+
+/* weight of NEE towards a point light from the distance-sampled vertex at t */
+inline float equiangular_distance_weight(const SceneData *sc, const EquiangularSegmentState *es,
+                                         __global const Medium *m, const LightSample *ls, float t) {
+    if (es->tech == EQ_NONE || sc->lights[ls->light].type != LIGHT_POINT) return 1.0f;
+    if (es->tech == EQ_ONLY_EQUIANGULAR) return 0.0f;
+    float pdf_e = sample_equiangular_pdf(es->o, es->d, es->t_seg, vload_f3(sc->lights[ls->light].position), t);
+    float pdf_d = medium_distance_pdf(m, es->beta, t);
+    if (es->tech == EQ_ONLY_DISTANCE) return 2.0f * power_heuristic(pdf_d, pdf_e);
+    if (!sc->params->mis) return pdf_e > 0.0f ? 0.0f : 1.0f;
+    return power_heuristic(pdf_d, pdf_e);
+}
+
+/* Decide the techniques for the segment the path is about to cross. */
+inline EquiangularSegmentState equiangular_begin(const SceneData *sc, Rng *rng, __global const Medium *m,
+                                                 float3 o, float3 d, float t_seg, float3 beta, int depth,
+                                                 bool do_nee) {
+    __global const RenderParams *rp = sc->params;
+    EquiangularSegmentState es;
+    es.tech = EQ_NONE;
+    es.o = o;
+    es.d = d;
+    es.beta = beta;
+    es.t_seg = t_seg;
+    /* the vertex would be depth + 1: the same limit the distance-sampled vertex obeys */
+    if (rp->equiangular == EQUIANGULAR_OFF || !do_nee || m->type != MEDIUM_HOMOGENEOUS
+        || (rp->max_depth >= 0 && depth + 1 >= rp->max_depth))
+        return es;
+    es.tech = EQ_BOTH;
+    if (rp->equiangular == EQUIANGULAR_ONE_SAMPLE && rp->mis)
+        es.tech = rng_next_float(rng) < 0.5f ? EQ_ONLY_EQUIANGULAR : EQ_ONLY_DISTANCE;
+    return es;
+}
+
+/* The equiangular sample's estimate of D_k for the light it picks, before the factor beta. */
+inline float3 equiangular_direct(const SceneData *sc, Rng *rng, const EquiangularSegmentState *es,
+                                 __global const Medium *m, int medium, uint *cutoffs) {
+    if (es->tech != EQ_BOTH && es->tech != EQ_ONLY_EQUIANGULAR) return (float3)(0.0f);
+    int count = sc->params->light_count;
+    float u_pick = rng_next_float(rng);
+    float u = rng_next_float(rng);
+    int li = min((int)(u_pick * (float)count), count - 1);
+    __global const Light *l = &sc->lights[li];
+    if (l->type != LIGHT_POINT) return (float3)(0.0f);   /* other lights: NEE at the distance sample */
+    float3 lp = vload_f3(l->position);
+    float t, pdf_e;
+    if (!sample_equiangular(es->o, es->d, es->t_seg, lp, u, &t, &pdf_e)) return (float3)(0.0f);
+    float3 x = es->o + t * es->d;
+    float3 v = lp - x;
+    float d2 = dot(v, v);
+    if (!(d2 > 0.0f)) return (float3)(0.0f);
+    float dist = sqrt(d2);
+    float3 wi = v / dist;
+    float w = equiangular_weight(es->tech, sc->params->mis, pdf_e, medium_distance_pdf(m, es->beta, t));
+    if (!(w > 0.0f)) return (float3)(0.0f);
+    float3 tr_shadow = shadow_transmittance(sc, x, wi, dist * 0.9999f, medium, rng, cutoffs);
+    if (max_component(tr_shadow) <= 0.0f) return (float3)(0.0f);
+    float3 sigma_t = vload_f3(m->sigma_t);
+    float3 sigma_s = sigma_t * vload_f3(m->albedo);
+    float ph = phase_eval(m, es->d, wi);
+    return transmittance_exp(sigma_t, t) * sigma_s * tr_shadow * vload_f3(l->value)
+           * (ph * w * (float)count / (pdf_e * d2));
+}
+#endif
+
 /* Radiance arriving at o from direction -d. *cutoffs counts segments whose tracking hit its bound. */
 inline float3 integrator_radiance(const SceneData *sc, Rng *rng, float3 o, float3 d, float t_max, uint *cutoffs) {
     __global const RenderParams *rp = sc->params;
@@ -141,8 +263,13 @@ inline float3 integrator_radiance(const SceneData *sc, Rng *rng, float3 o, float
         if (medium >= 0) {
             __global const Medium *m = &sc->media[medium];
             /* the segment starts at the surface the ray left, t_back behind the offset origin */
-            MediumSample ms = medium_sample(sc, m, o - t_back * d, d, (hit ? h.t : t_max) + t_back, beta, rng,
-                                            cutoffs);
+            float3 seg_o = o - t_back * d;
+            float seg_t = (hit ? h.t : t_max) + t_back;
+#if VOLCL_HAS_EQUIANGULAR
+            EquiangularSegmentState es = equiangular_begin(sc, rng, m, seg_o, d, seg_t, beta, depth, do_nee);
+            L += beta * equiangular_direct(sc, rng, &es, m, medium, cutoffs);
+#endif
+            MediumSample ms = medium_sample(sc, m, seg_o, d, seg_t, beta, rng, cutoffs);
 #if VOLCL_HAS_EMISSIVE_MEDIA
             L += beta * ms.emission;
 #endif
@@ -162,7 +289,11 @@ inline float3 integrator_radiance(const SceneData *sc, Rng *rng, float3 o, float
                     float2 ul = rng_next_float2(rng);
                     if (light_sample(sc, p, u_pick, ul, &ls) && max_component(ls.value) > 0.0f) {
                         float ph = phase_eval(m, d, ls.wi);
-                        L += beta * nee_contribution(sc, &ls, (float3)(ph), ph, p, medium, rng, cutoffs);
+                        float3 c = nee_contribution(sc, &ls, (float3)(ph), ph, p, medium, rng, cutoffs);
+#if VOLCL_HAS_EQUIANGULAR
+                        c *= equiangular_distance_weight(sc, &es, m, &ls, ms.t);
+#endif
+                        L += beta * c;
                     }
                 }
                 float3 nd;

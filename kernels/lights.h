@@ -12,6 +12,7 @@ typedef struct {
     float3 value;   /* radiance arriving along -wi before visibility (Le, I / d^2 or E) */
     float pdf;
     bool delta;
+    int light;      /* index of the light sampled */
 } LightSample;
 
 /* Solid-angle pdf of reaching point `p` with normals ng/ns on area light `li` from `ref`. */
@@ -37,6 +38,7 @@ inline bool light_sample(const SceneData *sc, float3 ref, float u_pick, float2 u
     __global const Light *l = &sc->lights[li];
     float choice = 1.0f / (float)count;
     ls->delta = false;
+    ls->light = li;
 #if VOLCL_HAS_AREA_LIGHTS
     if (l->type == LIGHT_AREA) {
         float3 p, ng, ns;

@@ -18,6 +18,7 @@
 #include "grid.h"
 #include "media.h"
 #include "lights.h"
+#include "equiangular.h"
 #include "camera.h"
 #include "integrator.h"
 

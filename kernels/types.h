@@ -131,6 +131,11 @@ typedef struct {
     int pad0[2];
 } GridVolume;
 
+/* RenderParams.equiangular: how point-light direct lighting in homogeneous media is estimated */
+#define EQUIANGULAR_OFF 0           /* free-flight distance sampling and NEE alone */
+#define EQUIANGULAR_TWO_SAMPLE 1    /* one equiangular and one distance sample per segment, both kept */
+#define EQUIANGULAR_ONE_SAMPLE 2    /* one of the two per segment, chosen at random */
+
 /* Everything a sample pass needs besides the scene buffers. */
 typedef struct {
     float cam_to_world[12]; /* row-major 3x4: rotation/scale columns then translation */
@@ -154,7 +159,7 @@ typedef struct {
     int nee;                /* next-event estimation on (1) or off (0: lights are found by hitting them) */
     int mis;                /* with nee: combine with BSDF / phase sampling by MIS (1) or not (0) */
     float majorant_scale;   /* every majorant is multiplied by this (>= 1; 1 = tight); a test knob */
-    int pad0;
+    int equiangular;        /* EQUIANGULAR_*; read only by VOLCL_HAS_EQUIANGULAR builds (integrator.h) */
 } RenderParams;
 
 #endif

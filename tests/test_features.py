@@ -57,8 +57,10 @@ def test_bsdfs_lights_shapes_and_boundaries():
     sc = scene([glass, mirror, plane, hole],
                [Emitter("point", rgb(1.0), position=np.zeros(3)), Emitter("directional", rgb(1.0), direction=np.array([0, -1.0, 0])),
                 constant_env(0.1)])
+    # the point light at the origin sits inside the glass sphere's fog: equiangular sampling applies
     assert on(detect(sc)) == {"SPHERES", "SHADING_NORMALS", "DIFFUSE", "DIELECTRIC", "CONDUCTOR", "NULL_BSDF",
-                              "POINT_LIGHTS", "DIRECTIONAL_LIGHTS", "ENV_LIGHTS", "MEDIA", "MEDIUM_BOUNDARIES"}
+                              "POINT_LIGHTS", "DIRECTIONAL_LIGHTS", "ENV_LIGHTS", "MEDIA", "MEDIUM_BOUNDARIES",
+                              "EQUIANGULAR"}
 
 
 def test_defines_cover_every_flag_with_zero_or_one():

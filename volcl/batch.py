@@ -147,7 +147,8 @@ class Progress:
             now = time.monotonic()
             if self.last_line is None or now - self.last_line >= PROGRESS_LINE_SECONDS:
                 self.last_line = now
-                print(f"volcl: {self.name}: {self.done}/{self.total} spp, {now - self.t0:.1f} s",
+                total = "?" if self.total is None else self.total
+                print(f"volcl: {self.name}: {self.done}/{total} spp, {now - self.t0:.1f} s",
                       file=sys.stderr, flush=True)
 
     def close(self):
@@ -178,18 +179,24 @@ def render_job(job: Job, opts, device, stop: StopRequest, load_scene, defines, f
     from .render import Renderer
     out = check_writable(job.output)
     scene = load_scene(job.scene)
-    spp = opts.spp or scene.spp
+    # --spp caps --time-limit and --target-error; without any of the three, the scene's spp applies
+    time_limit, target_error = getattr(opts, "time_limit", None), getattr(opts, "target_error", None)
+    spp = opts.spp or (None if time_limit or target_error else scene.spp)
+    estimator = getattr(opts, "estimator", None)
+    if estimator is not None and not estimator.nee and any(e.kind in ("point", "directional") for e in scene.emitters):
+        print(f"volcl: warning: {job.scene}: with --nee off, point and directional lights are never found (no "
+              "path can hit them)", file=sys.stderr)
     ckpt = checkpoint.path_for(out)
     state = meta = None
     if opts.resume:
         if ckpt.is_file():
             state, meta = checkpoint.load(ckpt)
-        elif _already_rendered(out, job.scene, defines, spp, scene, opts.seed):
+        elif spp is not None and _already_rendered(out, job.scene, defines, spp, scene, opts.seed):
             job.status, job.spp = "done earlier, kept", spp
             print(f"{out}: already rendered with {spp} spp or more; kept", flush=True)
             return
     seed = opts.seed if opts.seed is not None else (meta["seed"] if meta else None)
-    renderer = Renderer(scene, device=device, features=features, seed=seed)
+    renderer = Renderer(scene, device=device, features=features, seed=seed, estimator=estimator)
     ident = checkpoint.identity(renderer, job.scene, defines)
     if state is not None:
         checkpoint.check(ckpt, meta, ident, renderer.seed)
@@ -209,7 +216,7 @@ def render_job(job: Job, opts, device, stop: StopRequest, load_scene, defines, f
         return
     resumed_at = renderer.samples_done
     interval = opts.checkpoint_every * 60.0 if opts.checkpoint_every else None
-    extra = {"spp_requested": spp}
+    extra = {"spp_requested": spp or 0}
     last_save = time.monotonic()
 
     def after_pass():
@@ -221,18 +228,21 @@ def render_job(job: Job, opts, device, stop: StopRequest, load_scene, defines, f
 
     progress = Progress(Path(job.scene).name, renderer.samples_done, spp, opts.quiet)
     try:
-        result = renderer.render(max(spp - renderer.samples_done, 0), progress=progress.update, stop=after_pass)
+        result = renderer.render(None if spp is None else max(spp - renderer.samples_done, 0),
+                                 progress=progress.update, stop=after_pass, time_limit=time_limit,
+                                 target_error=target_error, min_spp=getattr(opts, "min_spp", 16))
     finally:
         progress.close()
-    complete = result.spp >= spp
+    complete = result.stop_reason != "stopped" and (spp is None or result.spp >= spp)
     if interval is not None and (not complete or opts.keep_checkpoint):
         checkpoint.save(ckpt, renderer, ident, extra)
     meta_out = {"scene": str(Path(job.scene).resolve()), "scene_sha256": ident["scene_sha256"],
-                "defines": ident["defines"], "spp": result.spp, "spp_requested": spp, "complete": int(complete),
+                "defines": ident["defines"], "spp": result.spp, "spp_requested": spp or 0, "complete": int(complete),
                 "seed": renderer.seed, "device": result.device, "features": result.stats["features"],
                 "kernel_sha256": ident["kernel_sha256"], "render_seconds": round(result.seconds, 3),
                 "version": __version__, "invalid_samples": result.invalid,
-                "tracking_cutoffs": result.tracking_cutoffs}
+                "tracking_cutoffs": result.tracking_cutoffs, "rel_error": float(result.rel_error),
+                "stop_reason": result.stop_reason, "estimator": renderer.estimator.describe()}
     layers = {"variance": result.variance} if out.suffix.lower() == ".exr" else None
     write_image(out, result.image, meta_out, layers)
     if complete and not opts.keep_checkpoint and ckpt.is_file():
@@ -241,12 +251,17 @@ def render_job(job: Job, opts, device, stop: StopRequest, load_scene, defines, f
     if complete:
         job.status = f"ok (resumed at {resumed_at} spp)" if resumed_at else "ok"
     else:
-        job.status = f"interrupted ({result.spp} of {spp} spp)"
+        job.status = f"interrupted ({result.spp} of {spp or '?'} spp)"
         kept = f" and {ckpt} (continue with --resume)" if interval is not None else ""
         print(f"volcl: interrupted after {result.spp} spp; wrote {out}{kept}", file=sys.stderr, flush=True)
-    print(f"{out}: {result.spp} spp in {result.seconds:.2f} s, {result.samples_per_second / 1e6:.2f} M samples/s, "
+    print(f"{out}: {result.spp} spp in {result.seconds:.2f} s ({_STOPPED[result.stop_reason]}), "
+          f"{result.samples_per_second / 1e6:.2f} M samples/s, relative error {100 * result.rel_error:.2f}%, "
           f"invalid samples {result.invalid}, tracking cut-offs {result.tracking_cutoffs}, device {result.device}, "
           f"features {result.stats['features']}", flush=True)
+
+
+_STOPPED = {"spp": "spp reached", "time": "time limit reached", "error": "target error reached",
+            "stopped": "interrupted"}
 
 
 def print_table(jobs: list[Job], file=sys.stdout):

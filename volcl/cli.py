@@ -5,6 +5,7 @@ import argparse
 import math
 import sys
 import time
+from pathlib import Path
 
 from . import __version__
 from .errors import VolclError
@@ -45,12 +46,33 @@ def _features(args):
         raise VolclError(f"--features: {exc}") from None
 
 
+def _on_off(value):
+    return value == "on"
+
+
+def _estimator(args):
+    from .estimator import Estimator
+    return Estimator(nee=_on_off(args.nee), mis=_on_off(args.mis), equiangular=args.equiangular,
+                     equiangular_mis=args.equiangular_mis)
+
+
+def _check_stopping(args):
+    """--spp caps --time-limit and --target-error; with neither of those the scene's own spp applies
+    (volcl.batch)."""
+    if args.time_limit is not None and args.time_limit <= 0:
+        raise VolclError(f"--time-limit {args.time_limit}: expected a positive number of seconds")
+    if args.target_error is not None and not args.target_error > 0:
+        raise VolclError(f"--target-error {args.target_error}: expected a positive relative error, e.g. 0.02")
+
+
 def cmd_render(args):
     from . import batch
     if args.checkpoint_every < 0:
         raise VolclError("--checkpoint-every: expected minutes >= 0 (0 disables checkpoints)")
     if args.spp is not None and args.spp < 1:
         raise VolclError(f"--spp {args.spp}: expected a positive sample count")
+    _check_stopping(args)
+    args.estimator = _estimator(args)
     defines = _defines(args.define)
     features = _features(args)
     return batch.run(args, args.device, lambda path: _load(path, args), defines, features)
@@ -138,7 +160,25 @@ def cmd_test(args):
     return 1 if failed else 0
 
 
+def cmd_converge(args):
+    from . import device as devmod
+    from .converge import converge, markdown_table
+    scene = _load(args.scene, args)
+    if args.max_seconds <= 0:
+        raise VolclError(f"--max-seconds {args.max_seconds}: expected a positive number of seconds")
+    choices = [c.strip() for c in args.choices.split(",")] if args.choices else None
+    report = converge(scene, name=Path(args.scene).stem, reference=args.reference, out=args.out,
+                      max_seconds=args.max_seconds, reference_seconds=args.reference_seconds, choices=choices,
+                      seed=args.seed, device=devmod.choose(args.device), features=_features(args),
+                      quiet=args.quiet, clock=args.clock)
+    print(markdown_table(report))
+    for p in (report.csv_path, report.plot_path, report.table_path):
+        print(f"wrote {p}")
+    return 0
+
+
 def main(argv=None):
+    from .estimator import CHOICES
     p = argparse.ArgumentParser(prog="volcl", description="volcl: a volumetric path tracer on OpenCL")
     p.add_argument("--version", action="version", version=f"volcl {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
@@ -151,6 +191,18 @@ def main(argv=None):
         sp.add_argument("--device", help="device index P:D, name substring, 'cpu' or 'gpu' (default: $VOLCL_DEVICE)")
         sp.add_argument("--features", help="'all': compile every feature instead of only the scene's")
         sp.add_argument("-v", "--verbose", action="store_true")
+
+    def estimator_opts(sp):
+        sp.add_argument("--nee", choices=("on", "off"), default="on",
+                        help="next-event estimation: sample lights at every vertex (default on)")
+        sp.add_argument("--mis", choices=("on", "off"), default="on",
+                        help="combine light sampling with BSDF / phase sampling by MIS (default on)")
+        sp.add_argument("--equiangular", choices=("auto", "on", "off"), default="auto",
+                        help="equiangular sampling towards point lights in media; auto: where a point "
+                             "light is inside a medium (default auto)")
+        sp.add_argument("--equiangular-mis", choices=("two", "one"), default="two",
+                        help="combine equiangular and distance samples by two-sample (default) or "
+                             "one-sample MIS")
 
     r = sub.add_parser("render", help="render one or more scenes")
     r.add_argument("scenes", nargs="+", metavar="SCENE")
@@ -166,8 +218,33 @@ def main(argv=None):
     r.add_argument("--keep-checkpoint", action="store_true",
                    help="keep the checkpoint of a finished render (to add samples later with --resume --spp)")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar (or progress lines in logs)")
+    r.add_argument("--time-limit", type=float, metavar="SECONDS", help="stop after this much render time")
+    r.add_argument("--target-error", type=float, metavar="E",
+                   help="stop once the image's estimated relative error is at most E (e.g. 0.02)")
+    r.add_argument("--min-spp", type=int, default=16, metavar="N",
+                   help="samples per pixel before --target-error trusts the estimate (default 16)")
+    estimator_opts(r)
     scene_opts(r)
     r.set_defaults(func=cmd_render)
+
+    c = sub.add_parser("converge", help="error against render time for each estimator choice that applies")
+    c.add_argument("scene")
+    c.add_argument("--reference", metavar="REF.exr",
+                   help="reference image (default: rendered first, with the default estimator)")
+    c.add_argument("--out", default=".", metavar="DIR", help="folder for the CSV, plot and table (default .)")
+    c.add_argument("--max-seconds", type=float, default=20.0, metavar="S",
+                   help="render time per estimator choice (default 20)")
+    c.add_argument("--reference-seconds", type=float, metavar="S",
+                   help="render time of the reference when none is given (default 4 x --max-seconds)")
+    c.add_argument("--choices", help="comma-separated subset of: " + ", ".join(CHOICES)
+                   + " (default: those that apply to the scene)")
+    c.add_argument("--clock", choices=("cpu", "wall"), default="cpu",
+                   help="measure render cost as process CPU time (default; robust on a shared machine) "
+                        "or wall-clock time")
+    c.add_argument("--seed", type=int, default=1)
+    c.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    scene_opts(c)
+    c.set_defaults(func=cmd_converge)
 
     d = sub.add_parser("devices", help="list OpenCL devices and whether volcl's kernels build on them")
     d.set_defaults(func=cmd_devices)

@@ -21,6 +21,7 @@ FLAGS = (
     "HG",                   # an anisotropic (Henyey-Greenstein) phase function
     "EMISSIVE_MEDIA",       # a medium that emits light
     "GRID_MEDIA",           # a heterogeneous medium: grid lookups, delta and ratio tracking
+    "EQUIANGULAR",          # equiangular sampling towards point lights in homogeneous media
 )
 
 
@@ -61,7 +62,79 @@ def detect(scene: Scene) -> dict[str, bool]:
     f["HG"] = any(m.phase.kind == "hg" for m in media)
     f["EMISSIVE_MEDIA"] = any(m.radiance is not None and np.any(np.asarray(m.radiance) > 0) for m in media)
     f["GRID_MEDIA"] = any(m.kind == "heterogeneous" for m in media)
+    # the estimator's default ('auto'): worth compiling where a point light sits inside a medium
+    f["EQUIANGULAR"] = f["POINT_LIGHTS"] and any(m is not None for m in point_light_media(scene))
     return f
+
+
+# Directions of the probe rays that find the medium around a point: the axes and the diagonals,
+# turned slightly so that no probe runs exactly along an axis-aligned wall or through its edges.
+_PROBES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]]
+                   + [[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], np.float64)
+_PROBES = _PROBES + np.array([0.0123, -0.0217, 0.0311])
+_PROBES /= np.linalg.norm(_PROBES, axis=1, keepdims=True)
+
+
+def _first_transition(scene: Scene, o: np.ndarray, d: np.ndarray):
+    """(shape, dot(d, ng)) of the nearest shape naming a medium that the ray o + t d (t > 0) meets,
+    or None. Shapes that name no medium are passed through: crossing them changes no medium."""
+    best_t, best = np.inf, None
+    for s in scene.shapes:
+        if s.interior is None and s.exterior is None:
+            continue
+        if s.kind == "sphere":
+            oc = o - s.center
+            b = oc @ d
+            disc = b * b - (oc @ oc - s.radius ** 2)
+            if disc < 0:
+                continue
+            for t in sorted((-b - np.sqrt(disc), -b + np.sqrt(disc))):
+                if 1e-9 < t < best_t:
+                    n = (o + t * d - s.center) / s.radius
+                    best_t, best = t, (s, float(d @ (-n if s.flip_normals else n)))
+                    break
+            continue
+        tri = s.vertices[s.faces]
+        for chunk in range(0, len(tri), 1 << 18):
+            p0, p1, p2 = (tri[chunk:chunk + (1 << 18), k] for k in range(3))
+            e1, e2 = p1 - p0, p2 - p0
+            pv = np.cross(d, e2)
+            det = (e1 * pv).sum(1)
+            ok = np.abs(det) > 1e-300
+            inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+            tv = o - p0
+            u = (tv * pv).sum(1) * inv
+            qv = np.cross(tv, e1)
+            v = (qv @ d) * inv
+            t = (e2 * qv).sum(1) * inv
+            hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 1e-9) & (t < best_t)
+            if hit.any():
+                k = np.flatnonzero(hit)[np.argmin(t[hit])]
+                best_t, best = t[k], (s, float(np.cross(e1[k], e2[k]) @ d))
+    return best
+
+
+def medium_at(scene: Scene, point) -> object:
+    """The medium around `point` by the renderer's rules (a shape's geometric normal points to its
+    exterior), voted over probe rays; the camera's medium when no probe meets a shape that names one
+    (an open scene filled with the camera's medium)."""
+    o = np.asarray(point, np.float64)
+    votes = {}
+    for d in _PROBES:
+        found = _first_transition(scene, o, d)
+        if found is None:
+            continue
+        shape, cos = found
+        m = shape.interior if cos > 0 else shape.exterior
+        votes.setdefault(id(m), [m, 0])[1] += 1
+    if not votes:
+        return scene.camera.medium
+    return max(votes.values(), key=lambda mv: mv[1])[0]
+
+
+def point_light_media(scene: Scene) -> list:
+    """The medium around each point light (None: vacuum), in the order of scene.emitters' point lights."""
+    return [medium_at(scene, e.position) for e in scene.emitters if e.kind == "point"]
 
 
 def all_features() -> dict[str, bool]:

@@ -78,7 +78,7 @@ RENDER_PARAMS = np.dtype([
     ("light_count", np.int32), ("env_light", np.int32), ("filter_size", np.int32),
     ("filter_radius", np.float32), ("seed", np.uint32), ("scene_radius", np.float32),
     ("scene_center", *f3), ("nee", np.int32), ("mis", np.int32), ("majorant_scale", np.float32),
-    ("pad0", np.int32),
+    ("equiangular", np.int32),
 ])
 
 # name in kernels/types.h -> dtype, for the layout probe

@@ -12,13 +12,16 @@ differently and changes the last bits; the Renderer's `slots` argument exists fo
 from __future__ import annotations
 
 import hashlib
+import math
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from . import device as devmod
+from .accuracy import relative_standard_error
 from .device import cl
+from .estimator import Estimator
 from .features import describe
 from .pack import pack
 from .program import build_program, build_seconds, note_build
@@ -32,6 +35,9 @@ MAX_ITEMS = 1 << 19
 # under this many seconds by sizing the next launch from the time the last one took.
 GPU_LAUNCH_SECONDS = 0.1
 _DEFAULT = object()
+# Samples per pixel before a target error is trusted: with fewer, a pixel whose rare bright paths
+# have not turned up yet reports a small variance along with its small mean (README, "Accuracy").
+MIN_SPP_FOR_ERROR = 16
 
 
 @dataclass
@@ -48,6 +54,12 @@ class RenderResult:
     # medium segments whose delta / ratio tracking hit its step bound and was cut short (each a
     # biased estimate; never happens in ordinary scenes, see kernels/media.h)
     tracking_cutoffs: int = 0
+    stop_reason: str = "spp"    # the rule that ended the render: 'spp', 'time' or 'error'
+
+    @property
+    def rel_error(self) -> float:
+        """The image's estimated relative standard error (volcl.accuracy.relative_standard_error)."""
+        return relative_standard_error(self.image, self.variance)
 
     @property
     def samples_per_second(self) -> float:
@@ -68,10 +80,15 @@ class Renderer:
 
     def __init__(self, scene: Scene, device: devmod.DeviceInfo | None = None, features: dict | None = None,
                  seed: int | None = None, slots: int | None = None, tile: int | None = None,
-                 launch_seconds=_DEFAULT, majorant_cells: int | None = None, majorant_scale: float = 1.0):
+                 launch_seconds=_DEFAULT, majorant_cells: int | None = None, majorant_scale: float = 1.0,
+                 estimator: Estimator | None = None):
         self.scene = scene
         self.device = device or devmod.choose()
+        self.estimator = estimator or Estimator()
+        features, estimator_params = self.estimator.resolve(scene, features)
         self.packed = pack(scene, features, majorant_cells=majorant_cells, majorant_scale=majorant_scale)
+        for name, value in estimator_params.items():
+            self.packed.arrays["params"][name] = value
         # a scene too large for the device is the user's to fix: say so before uploading anything
         # (accumulators: sums, sums_sq, invalid, cutoffs for at least MIN_ITEMS slots, see below)
         devmod.check_fits(self.device, {name: self.packed.arrays[name].nbytes for name in self.ARG_ORDER},
@@ -175,16 +192,30 @@ class Renderer:
         for (buf, size), tmp in zip(rows, scratch):
             cl.enqueue_copy(self.queue, buf, tmp, dst_offset=size * first_slot * self.npix, byte_count=size * n)
 
-    def render(self, spp: int, progress=None, time_limit: float | None = None, stop=None) -> RenderResult:
-        """Add `spp` samples per pixel and return the image of everything accumulated so far.
-
-        Ends early, between sample passes, when time_limit seconds have passed or `stop()` returns
-        true; `progress(n)` is called after each pass with the samples it added."""
-        target = self.samples_done + spp
+    def render(self, spp: int | None = None, progress=None, time_limit: float | None = None,
+               target_error: float | None = None, min_spp: int = MIN_SPP_FOR_ERROR, stop=None) -> RenderResult:
+        """Add samples per pixel until the first of the given rules is met, and return the image of
+        everything accumulated so far:
+          spp           this many more samples per pixel;
+          time_limit    this many seconds spent in this call;
+          target_error  the image's estimated relative standard error (RenderResult.rel_error) at
+                        or below this, checked between passes once min_spp samples are in;
+          stop()        a callback returning true (checked between passes: signals, checkpoints).
+        With none of spp, time_limit and target_error, the scene's own spp. RenderResult.stop_reason
+        names the rule that ended it; progress(n) is called after each pass with the samples added."""
+        if spp is None and time_limit is None and target_error is None:
+            spp = self.scene.spp
+        target = None if spp is None else self.samples_done + spp
+        check = None if target_error is None else _ErrorCheck(target_error, max(min_spp, 1))
+        reason = "spp"
         t_start = time.perf_counter()
-        while self.samples_done < target:
+        while target is None or self.samples_done < target:
             t0 = time.perf_counter()
-            count = min(self.slots - self.samples_done % self.slots, target - self.samples_done)
+            count = self.slots - self.samples_done % self.slots
+            if target is not None:
+                count = min(count, target - self.samples_done)
+            if check is not None:
+                count = max(1, min(count, check.next_at - self.samples_done))
             self._pass(self.samples_done, count)
             self.queue.finish()
             self.samples_done += count
@@ -192,10 +223,17 @@ class Renderer:
             if progress is not None:
                 progress(count)
             if time_limit is not None and time.perf_counter() - t_start >= time_limit:
+                reason = "time"
+                break
+            if check is not None and self.samples_done >= check.next_at and check.reached(self):
+                reason = "error"
                 break
             if stop is not None and stop():
+                reason = "stopped"
                 break
-        return self.result()
+        result = self.result()
+        result.stop_reason = reason
+        return result
 
     def state(self) -> dict:
         """The accumulated state, raw: what a checkpoint stores to continue bit for bit."""
@@ -250,8 +288,32 @@ class Renderer:
                    **self.packed.stats})
 
 
+class _ErrorCheck:
+    """When to read the image back to test a target error. Each check predicts, from the error's
+    1/sqrt(spp) fall, the spp at which the target will be met and checks next there (at least 5%
+    and at most 100% more samples later), so a render overshoots its target by little and spends
+    few read-backs."""
+
+    def __init__(self, target: float, min_spp: int):
+        self.target = target
+        self.next_at = min_spp
+        self.last = math.inf
+
+    def reached(self, renderer: "Renderer") -> bool:
+        n = renderer.samples_done
+        self.last = renderer.result().rel_error
+        if self.last <= self.target:
+            return True
+        wanted = n * (self.last / self.target) ** 2 if math.isfinite(self.last) else 2 * n
+        self.next_at = int(math.ceil(min(max(wanted, 1.05 * n, n + 1), 2 * n)))
+        return False
+
+
 def render(scene: Scene, spp: int | None = None, device=None, features=None, seed=None, progress=None,
-           time_limit=None, majorant_cells=None, majorant_scale=1.0) -> RenderResult:
-    r = Renderer(scene, device=device, features=features, seed=seed, majorant_cells=majorant_cells,
-                 majorant_scale=majorant_scale)
-    return r.render(spp if spp is not None else scene.spp, progress=progress, time_limit=time_limit)
+           time_limit=None, target_error=None, estimator: Estimator | None = None, majorant_cells=None,
+           majorant_scale=1.0) -> RenderResult:
+    r = Renderer(scene, device=device, features=features, seed=seed, estimator=estimator,
+                 majorant_cells=majorant_cells, majorant_scale=majorant_scale)
+    if spp is None and time_limit is None and target_error is None:
+        spp = scene.spp
+    return r.render(spp, progress=progress, time_limit=time_limit, target_error=target_error)
