@@ -110,8 +110,8 @@ def plot(report: Report, path: Path):
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError:
-        raise VolclError("volcl converge plots with matplotlib: pip install matplotlib "
-                         "(or install volcl with the 'bench' extra)") from None
+        raise VolclError("volcl converge plots with matplotlib, a dependency of volcl that is missing "
+                         "here: pip install matplotlib") from None
     fig, ax = plt.subplots(figsize=(6.4, 4.4), dpi=100)
     for c in report.curves:
         ok = [(t, e) for t, e in zip(c.seconds, c.rel_rmse) if t > 0 and e > 0]
