@@ -67,12 +67,19 @@ inline int sample_discrete_cdf(const __global float *cdf, int n, float u) {
  * tabulates the filter's normalized CDF at `size` equally spaced x in [-radius, radius]; inverting
  * it interval by interval samples each interval's exact share of the filter (sampling the filter,
  * instead of splatting weighted samples, converges to the same normalized filtered image). Within an
- * interval (radius / 2048 wide) the density is flat, far below any visible or measurable error. */
-inline float sample_filter_offset(const __global float *cdf, int size, float radius, float u) {
-    int k = sample_discrete_cdf(cdf + 1, size - 1, u);
-    float lo = cdf[k], hi = cdf[k + 1];
+ * interval (radius / 2048 wide) the density is flat, far below any visible or measurable error.
+ * After the CDF come size - 1 guide entries: entry i is the first interval whose CDF passes
+ * i / (size - 1), so finding u's interval takes a step or two instead of a binary search (which
+ * cost a fifth of a Cornell-box sample on PoCL). */
+inline float sample_filter_offset(const __global float *table, int size, float radius, float u) {
+    int n = size - 1;
+    int k = (int)table[size + min((int)(u * (float)n), n - 1)];
+    /* u * n can round up into the next guide bin: step back as well as forward */
+    while (k > 0 && table[k] > u) --k;
+    while (k < n - 1 && table[k + 1] <= u) ++k;
+    float lo = table[k], hi = table[k + 1];
     float f = hi > lo ? clamp((u - lo) / (hi - lo), 0.0f, 1.0f) : 0.5f;
-    return radius * (2.0f * ((float)k + f) / (float)(size - 1) - 1.0f);
+    return radius * (2.0f * ((float)k + f) / (float)n - 1.0f);
 }
 
 #endif

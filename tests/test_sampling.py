@@ -9,7 +9,7 @@ import stats
 from conftest import run_kernel
 from volcl import layout
 from volcl.features import all_features
-from volcl.pack import filter_table
+from volcl.pack import filter_cdf_size, filter_table
 from volcl.scene.model import Filter
 
 N = 1_000_000
@@ -146,7 +146,7 @@ def filter_profile(f):
 def table_density(table, radius):
     """Density sample_filter_offset draws from a CDF table: each interval of the equally spaced grid
     on [-radius, radius] holds cdf[k + 1] - cdf[k] of the mass, spread evenly."""
-    t = table.astype(np.float64)
+    t = table[:filter_cdf_size(table)].astype(np.float64)
     edges = np.linspace(-radius, radius, len(t))
     dens = np.diff(t) / np.diff(edges)
 
@@ -158,8 +158,8 @@ def table_density(table, radius):
 
 def sample_filter(cl_env, prog, f, seed):
     table = filter_table(f)
-    (x,) = run_kernel(cl_env, prog, "warp_filter_offset", N, [(f32, ())], u32(seed), i32(len(table)), f32(f.radius),
-                      inputs=[table])
+    (x,) = run_kernel(cl_env, prog, "warp_filter_offset", N, [(f32, ())], u32(seed), i32(filter_cdf_size(table)),
+                      f32(f.radius), inputs=[table])
     return table, x
 
 

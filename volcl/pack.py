@@ -110,8 +110,9 @@ def filter_profile(f: Filter, x: np.ndarray) -> np.ndarray:
 
 
 def filter_table(f: Filter, size: int = FILTER_TABLE_SIZE) -> np.ndarray:
-    """The filter's normalized CDF at `size` equally spaced offsets spanning [-radius, radius], for
-    sample_filter_offset. Each interval's mass is integrated with 64-point Gauss-Legendre, so the
+    """For sample_filter_offset: the filter's normalized CDF at `size` equally spaced offsets
+    spanning [-radius, radius], then size - 1 guide entries (entry i: the first interval whose CDF
+    passes i / (size - 1)). Each interval's mass is integrated with 64-point Gauss-Legendre, so the
     sampled shares are the filter's own to float64 precision."""
     edges = np.linspace(-f.radius, f.radius, size)
     nodes, weights = np.polynomial.legendre.leggauss(64)
@@ -119,7 +120,16 @@ def filter_table(f: Filter, size: int = FILTER_TABLE_SIZE) -> np.ndarray:
     mid = 0.5 * (edges[1:] + edges[:-1])
     mass = (filter_profile(f, mid[:, None] + half[:, None] * nodes[None]) * weights).sum(1) * half
     cdf = np.concatenate([[0.0], np.cumsum(mass)])
-    return (cdf / cdf[-1]).astype(np.float32)
+    cdf = (cdf / cdf[-1]).astype(np.float32)
+    n = size - 1
+    # computed on the float32 CDF the kernel compares against, so the guide never points past u
+    guide = np.searchsorted(cdf[1:], np.arange(n, dtype=np.float32) / np.float32(n), side="right")
+    return np.concatenate([cdf, np.minimum(guide, n - 1).astype(np.float32)])
+
+
+def filter_cdf_size(table: np.ndarray) -> int:
+    """The number of CDF entries in a filter_table (the rest is its guide)."""
+    return (len(table) + 1) // 2
 
 
 def camera_tangents(cam: Camera) -> tuple[float, float]:
