@@ -176,3 +176,7 @@ def test_time_to_error_interpolates_in_log_log():
     assert time_to_error(t, e, 0.01) is None
     # already below at the first point: back along slope -1/2
     assert time_to_error(t, e, 0.8) == pytest.approx(0.25)
+    # a dip below the target that does not last does not count; nor does an end above it
+    bumpy = [0.4, 0.15, 0.3, 0.1]
+    assert time_to_error(t, bumpy, 0.2) == pytest.approx(4.0 * 2 ** (math.log(1.5) / math.log(3.0)))
+    assert time_to_error(t, [0.4, 0.1, 0.1, 0.3], 0.2) is None

@@ -54,23 +54,23 @@ def relative_rmse(image, reference, reference_variance=None) -> float:
 
 
 def time_to_error(seconds, errors, target: float) -> float | None:
-    """Time at which the error first reaches `target`, interpolated linearly in log(time) against
-    log(error) between the measurements on either side (an unbiased estimator's error falls on a
-    straight line of slope -1/2 there). None when no measurement reaches the target. When the first
-    measurement is already below it, the line of slope -1/2 through that measurement is followed
-    back (never before zero time)."""
+    """Time from which the error stays at or below `target` for the rest of the measurements,
+    interpolated linearly in log(time) against log(error) between the last measurement above the
+    target and the next one (an unbiased estimator's error falls on a straight line of slope -1/2
+    there). Not the first crossing: a heavy-tailed estimator's error dips below a target by luck and
+    comes back up with the next rare bright path. None when the last measurement is above the
+    target. When every measurement is below it, the line of slope -1/2 through the first one is
+    followed back."""
     t = np.asarray(seconds, np.float64)
     e = np.asarray(errors, np.float64)
-    below = np.flatnonzero(e <= target)
-    if below.size == 0:
+    if e.size == 0 or e[-1] > target:
         return None
-    i = int(below[0])
-    if e[i] <= 0.0:
-        return float(t[i])
-    if i == 0:
-        return float(t[0] * (e[0] / target) ** 2)
+    above = np.flatnonzero(e > target)
+    if above.size == 0:
+        return float(t[0] * (e[0] / target) ** 2) if e[0] > 0 else float(t[0])
+    i = int(above[-1]) + 1
     t0, t1, e0, e1 = t[i - 1], t[i], e[i - 1], e[i]
-    if not (t0 > 0 and e0 > 0 and e1 < e0):
+    if not (t0 > 0 and e1 > 0):
         return float(t1)
     f = (math.log(e0) - math.log(target)) / (math.log(e0) - math.log(e1))
     return float(math.exp(math.log(t0) + f * (math.log(t1) - math.log(t0))))

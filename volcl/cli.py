@@ -167,7 +167,7 @@ def cmd_converge(args):
     if args.max_seconds <= 0:
         raise VolclError(f"--max-seconds {args.max_seconds}: expected a positive number of seconds")
     choices = [c.strip() for c in args.choices.split(",")] if args.choices else None
-    report = converge(scene, name=Path(args.scene).stem, reference=args.reference, out=args.out,
+    report = converge(scene, name=args.name or Path(args.scene).stem, reference=args.reference, out=args.out,
                       max_seconds=args.max_seconds, reference_seconds=args.reference_seconds, choices=choices,
                       seed=args.seed, device=devmod.choose(args.device), features=_features(args),
                       quiet=args.quiet, clock=args.clock)
@@ -238,6 +238,7 @@ def main(argv=None):
                    help="render time of the reference when none is given (default 4 x --max-seconds)")
     c.add_argument("--choices", help="comma-separated subset of: " + ", ".join(CHOICES)
                    + " (default: those that apply to the scene)")
+    c.add_argument("--name", help="name for the outputs and the table (default: the scene file's stem)")
     c.add_argument("--clock", choices=("cpu", "wall"), default="cpu",
                    help="measure render cost as process CPU time (default; robust on a shared machine) "
                         "or wall-clock time")

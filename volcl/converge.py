@@ -97,11 +97,11 @@ def markdown_table(report: Report) -> str:
 def write_csv(report: Report, path: Path):
     with open(path, "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["scene", "choice", "spp", "seconds", "rel_rmse", "rel_mse", "est_rel_error"])
+        w.writerow(["scene", "choice", "spp", "seconds", "clock", "rel_rmse", "rel_mse", "est_rel_error"])
         for c in report.curves:
             for row in zip(c.spp, c.seconds, c.rel_rmse, c.rel_mse, c.est_rel_error):
-                w.writerow([report.scene, c.choice, row[0], f"{row[1]:.6g}", f"{row[2]:.6g}", f"{row[3]:.6g}",
-                            f"{row[4]:.6g}"])
+                w.writerow([report.scene, c.choice, row[0], f"{row[1]:.6g}", report.clock, f"{row[2]:.6g}",
+                            f"{row[3]:.6g}", f"{row[4]:.6g}"])
 
 
 def plot(report: Report, path: Path):
@@ -147,6 +147,12 @@ def load_reference(path, width: int, height: int):
     return pixels[..., :3], variance
 
 
+def _advance(bar, seconds: float):
+    """Move the progress bar on by `seconds` of render time, never past its total (a render's last
+    pass may overrun its budget)."""
+    bar.update(max(0.0, min(round(seconds, 1), bar.total - bar.n)))
+
+
 # Clocks a render's cost can be measured with. 'cpu' is the process's CPU time, every OpenCL
 # worker thread of the CPU device included: on a machine shared with other work it measures what
 # the estimator costs, while wall time also measures the others' load. 'wall' is elapsed time (the
@@ -189,7 +195,7 @@ def converge(scene: Scene, name: str = "scene", reference=None, out=None, max_se
         bar.set_postfix_str("reference")
         r = Renderer(scene, device=device, features=features, seed=seed + 1000)
         res = r.render(time_limit=ref_seconds, progress=None)
-        bar.update(round(res.seconds, 1))
+        _advance(bar, res.seconds)
         ref_image, ref_var = res.image, res.variance
         ref_label = f"volcl, default estimator, {res.spp} spp in {res.seconds:.0f} s"
         if out is not None:
@@ -222,8 +228,7 @@ def converge(scene: Scene, name: str = "scene", reference=None, out=None, max_se
             t0 = now()
             res = r.render(add)
             spent += now() - t0
-            bar.update(round(min(spent, max_seconds) - min(curve.seconds[-1] if curve.seconds else 0.0,
-                                                             max_seconds), 1))
+            _advance(bar, min(spent, max_seconds) - min(curve.seconds[-1] if curve.seconds else 0.0, max_seconds))
             curve.spp.append(res.spp)
             curve.seconds.append(spent)
             curve.rel_mse.append(relative_mse(res.image, ref_image, ref_var))

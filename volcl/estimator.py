@@ -57,7 +57,9 @@ class Estimator:
         return feats, params
 
     def describe(self) -> str:
-        eq = self.equiangular if self.equiangular != "on" else f"on ({self.equiangular_mis}-sample MIS)"
+        eq = self.equiangular
+        if self.equiangular == "on":
+            eq = f"on ({self.equiangular_mis}-sample MIS)" if self.mis else "on (alone: MIS off)"
         return f"nee {'on' if self.nee else 'off'}, mis {'on' if self.mis else 'off'}, equiangular {eq}"
 
 
