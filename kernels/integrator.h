@@ -309,87 +309,88 @@ inline float3 integrator_radiance(const SceneData *sc, Rng *rng, float3 o, float
             }
         }
 #endif
-        if (!medium_vertex) {
-        if (!hit) {
+        if (!medium_vertex) {      /* the ray reached a surface, or escaped */
+            if (!hit) {
 #if VOLCL_HAS_ENV_LIGHTS
-            if (rp->env_light >= 0 && !(rp->hide_emitters && depth == 0)) {
-                float w = specular ? 1.0f : hit_weight(rp, prev_pdf, light_env_pdf(sc));
-                L += beta * vload_f3(sc->lights[rp->env_light].value) * w;
-            }
-#endif
-            break;
-        }
-        {
-            SurfacePoint s = surface_point(sc, &h, o, d);
-            __global const ShapeInfo *shape = &sc->shapes[s.shape];
-            float3 wo_world = -d;
-#if VOLCL_HAS_AREA_LIGHTS
-            if (shape->light >= 0 && !(rp->hide_emitters && depth == 0)) {
-                float3 le = light_area_emission(&sc->lights[shape->light], s.ns, wo_world);
-                if (max_component(le) > 0.0f) {
-                    float w = specular ? 1.0f
-                                       : hit_weight(rp, prev_pdf, light_area_pdf(sc, shape->light, prev_p, s.p, s.ng));
-                    L += beta * le * w;
+                if (rp->env_light >= 0 && !(rp->hide_emitters && depth == 0)) {
+                    float w = specular ? 1.0f : hit_weight(rp, prev_pdf, light_env_pdf(sc));
+                    L += beta * vload_f3(sc->lights[rp->env_light].value) * w;
                 }
-            }
 #endif
-            __global const Bsdf *bsdf = &sc->bsdfs[shape->bsdf];
-#if VOLCL_HAS_NULL_BSDF
-            if (bsdf->type == BSDF_NULL) {
-                /* a bare boundary: the ray goes on unchanged, possibly into another medium */
-                medium = medium_after(sc, &s, d, medium);
-                float3 next = offset_origin(s.p, s.mag, s.ng, d);
-                if (t_max < INFINITY) t_max = fmax(t_max - dot(next - o, d), 0.0f);
-                t_back = offset_back(next, s.p, s.ng, d);
-                o = next;
-                continue;
+                break;
             }
-#endif
-            if (rp->max_depth >= 0 && depth + 1 >= rp->max_depth) break;
-
-            float3 ss, ts;
-            make_frame(s.ns, &ss, &ts);
-            float3 wo = frame_to_local(wo_world, ss, ts, s.ns);
-            bool delta = bsdf_is_delta(bsdf);
-
-            if (do_nee && !delta) {
-                LightSample ls;
-                float u_pick = rng_next_float(rng);
-                float2 ul = rng_next_float2(rng);
-                if (light_sample(sc, s.p, u_pick, ul, &ls) && max_component(ls.value) > 0.0f) {
-                    float pdf;
-                    float3 f = bsdf_eval(bsdf, wo, frame_to_local(ls.wi, ss, ts, s.ns), &pdf);
-                    if (max_component(f) > 0.0f) {
-                        L += beta * nee_contribution(sc, &ls, f, pdf, offset_origin(s.p, s.mag, s.ng, ls.wi),
-                                                     medium_after(sc, &s, ls.wi, medium), rng, cutoffs);
+            {
+                SurfacePoint s = surface_point(sc, &h, o, d);
+                __global const ShapeInfo *shape = &sc->shapes[s.shape];
+                float3 wo_world = -d;
+#if VOLCL_HAS_AREA_LIGHTS
+                if (shape->light >= 0 && !(rp->hide_emitters && depth == 0)) {
+                    float3 le = light_area_emission(&sc->lights[shape->light], s.ns, wo_world);
+                    if (max_component(le) > 0.0f) {
+                        float w = specular ? 1.0f
+                                           : hit_weight(rp, prev_pdf,
+                                                        light_area_pdf(sc, shape->light, prev_p, s.p, s.ng));
+                        L += beta * le * w;
                     }
                 }
-            } else {
-                /* keep the random-number sequence aligned whatever the vertex type */
-                rng_next_float(rng);
-                rng_next_float2(rng);
-            }
-            if (rp->specular_chains_only && !delta) break;
+#endif
+                __global const Bsdf *bsdf = &sc->bsdfs[shape->bsdf];
+#if VOLCL_HAS_NULL_BSDF
+                if (bsdf->type == BSDF_NULL) {
+                    /* a bare boundary: the ray goes on unchanged, possibly into another medium */
+                    medium = medium_after(sc, &s, d, medium);
+                    float3 next = offset_origin(s.p, s.mag, s.ng, d);
+                    if (t_max < INFINITY) t_max = fmax(t_max - dot(next - o, d), 0.0f);
+                    t_back = offset_back(next, s.p, s.ng, d);
+                    o = next;
+                    continue;
+                }
+#endif
+                if (rp->max_depth >= 0 && depth + 1 >= rp->max_depth) break;
 
-            BsdfSample bs;
-            float u1 = rng_next_float(rng);
-            if (!bsdf_sample(bsdf, wo, u1, rng_next_float2(rng), &bs)) break;
-            float3 wi = frame_to_world(bs.wi, ss, ts, s.ns);
-            /* a shading normal can send the sampled direction below the geometric surface; the ray
-             * would then start on the wrong side, so such a path ends */
-            if (dot(wi, s.ng) * dot(bs.wi.z >= 0.0f ? s.ns : -s.ns, s.ng) < 0.0f) break;
-            beta *= bs.weight;
-            eta_scale *= bs.eta * bs.eta;
-            specular = bs.delta;
-            prev_pdf = bs.pdf;
-            prev_p = s.p;
-            medium = medium_after(sc, &s, wi, medium);
-            o = offset_origin(s.p, s.mag, s.ng, wi);
-            t_back = offset_back(o, s.p, s.ng, wi);
-            d = wi;
-            t_max = INFINITY;
-            ++depth;
-        }
+                float3 ss, ts;
+                make_frame(s.ns, &ss, &ts);
+                float3 wo = frame_to_local(wo_world, ss, ts, s.ns);
+                bool delta = bsdf_is_delta(bsdf);
+
+                if (do_nee && !delta) {
+                    LightSample ls;
+                    float u_pick = rng_next_float(rng);
+                    float2 ul = rng_next_float2(rng);
+                    if (light_sample(sc, s.p, u_pick, ul, &ls) && max_component(ls.value) > 0.0f) {
+                        float pdf;
+                        float3 f = bsdf_eval(bsdf, wo, frame_to_local(ls.wi, ss, ts, s.ns), &pdf);
+                        if (max_component(f) > 0.0f) {
+                            L += beta * nee_contribution(sc, &ls, f, pdf, offset_origin(s.p, s.mag, s.ng, ls.wi),
+                                                         medium_after(sc, &s, ls.wi, medium), rng, cutoffs);
+                        }
+                    }
+                } else {
+                    /* keep the random-number sequence aligned whatever the vertex type */
+                    rng_next_float(rng);
+                    rng_next_float2(rng);
+                }
+                if (rp->specular_chains_only && !delta) break;
+
+                BsdfSample bs;
+                float u1 = rng_next_float(rng);
+                if (!bsdf_sample(bsdf, wo, u1, rng_next_float2(rng), &bs)) break;
+                float3 wi = frame_to_world(bs.wi, ss, ts, s.ns);
+                /* a shading normal can send the sampled direction below the geometric surface; the ray
+                 * would then start on the wrong side, so such a path ends */
+                if (dot(wi, s.ng) * dot(bs.wi.z >= 0.0f ? s.ns : -s.ns, s.ng) < 0.0f) break;
+                beta *= bs.weight;
+                eta_scale *= bs.eta * bs.eta;
+                specular = bs.delta;
+                prev_pdf = bs.pdf;
+                prev_p = s.p;
+                medium = medium_after(sc, &s, wi, medium);
+                o = offset_origin(s.p, s.mag, s.ng, wi);
+                t_back = offset_back(o, s.p, s.ng, wi);
+                d = wi;
+                t_max = INFINITY;
+                ++depth;
+            }
         }
         if (max_component(beta) <= 0.0f) break;
         if (depth >= rp->rr_depth) {
