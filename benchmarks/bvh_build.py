@@ -18,21 +18,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from volcl.bvh import build_bvh, node_depths, sah_cost  # noqa: E402
-from common import cpu_model  # noqa: E402
+from common import bumpy_sphere, cpu_model  # noqa: E402
 
-
-
-def bumpy_sphere(rng, n_tris):
-    """Latitude-longitude sphere with a smooth radial bump pattern and a little noise."""
-    rows = max(2, int(np.sqrt(n_tris / 4)))
-    cols = max(3, n_tris // (2 * rows))
-    theta = np.linspace(0.0, np.pi, rows + 1)
-    phi = np.linspace(0.0, 2.0 * np.pi, cols + 1)
-    t, p = np.meshgrid(theta, phi, indexing="ij")
-    r = 1.0 + 0.05 * np.sin(7 * t) * np.cos(5 * p) + 0.002 * rng.standard_normal(t.shape)
-    verts = np.stack([r * np.sin(t) * np.cos(p), r * np.sin(t) * np.sin(p), r * np.cos(t)], -1)
-    a, b, c, d = verts[:-1, :-1], verts[:-1, 1:], verts[1:, :-1], verts[1:, 1:]
-    return np.concatenate([np.stack([a, b, d], -2), np.stack([a, d, c], -2)]).reshape(-1, 3, 3)
 
 
 def scattered(rng, n_tris):
@@ -45,7 +32,8 @@ def scattered(rng, n_tris):
 
 def triangle_soup(n, seed=0):
     rng = np.random.default_rng(seed)
-    sphere = bumpy_sphere(rng, int(0.7 * n))[:n]
+    verts, faces = bumpy_sphere(rng, int(0.7 * n))
+    sphere = verts[faces][:n]
     tris = np.concatenate([sphere, scattered(rng, n - len(sphere))])
     return tris[rng.permutation(n)]  # input order carries no spatial coherence
 

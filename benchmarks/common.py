@@ -23,3 +23,21 @@ def parse_defines(items) -> dict:
         k, v = item.split("=", 1)
         out[k.strip()] = v
     return out
+
+
+def bumpy_sphere(rng, n_tris):
+    """A latitude-longitude unit sphere (z up) with a smooth radial bump pattern and a little noise,
+    about n_tris triangles: (vertices (n, 3), faces (m, 3)). numpy is imported here so that the
+    rest of this module stays standard-library only."""
+    import numpy as np
+    rows = max(2, int(np.sqrt(n_tris / 4)))
+    cols = max(3, n_tris // (2 * rows))
+    theta = np.linspace(0.0, np.pi, rows + 1)
+    phi = np.linspace(0.0, 2.0 * np.pi, cols + 1)
+    t, p = np.meshgrid(theta, phi, indexing="ij")
+    r = 1.0 + 0.05 * np.sin(7 * t) * np.cos(5 * p) + 0.002 * rng.standard_normal(t.shape)
+    verts = np.stack([r * np.sin(t) * np.cos(p), r * np.sin(t) * np.sin(p), r * np.cos(t)], -1).reshape(-1, 3)
+    idx = np.arange((rows + 1) * (cols + 1)).reshape(rows + 1, cols + 1)
+    a, b, c, d = idx[:-1, :-1], idx[:-1, 1:], idx[1:, :-1], idx[1:, 1:]
+    faces = np.concatenate([np.stack([a, b, d], -1).reshape(-1, 3), np.stack([a, d, c], -1).reshape(-1, 3)])
+    return verts, faces

@@ -55,7 +55,7 @@ ROOT = HERE.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(HERE))
 import mitsuba_ref  # noqa: E402
-from common import cpu_model, parse_defines  # noqa: E402
+from common import bumpy_sphere, cpu_model, parse_defines  # noqa: E402
 
 
 def log(msg):
@@ -158,22 +158,13 @@ def synthetic_mesh_scene(n_triangles, seed=0):
     """A bumpy sphere of about n_triangles triangles on a floor quad, lit by a quad above."""
     from volcl.scene.model import Bsdf, Camera, Scene, Shape
     from volcl.scene.transform import lookat
-    rng = np.random.default_rng(seed)
-    rows = max(2, int(np.sqrt(n_triangles / 4)))
-    cols = max(3, n_triangles // (2 * rows))
-    theta = np.linspace(0.0, np.pi, rows + 1)
-    phi = np.linspace(0.0, 2.0 * np.pi, cols + 1)
-    t, p = np.meshgrid(theta, phi, indexing="ij")
-    r = 1.0 + 0.05 * np.sin(7 * t) * np.cos(5 * p) + 0.002 * rng.standard_normal(t.shape)
-    verts = np.stack([r * np.sin(t) * np.cos(p), r * np.cos(t) + 1.0, r * np.sin(t) * np.sin(p)], -1)
-    idx = np.arange((rows + 1) * (cols + 1)).reshape(rows + 1, cols + 1)
-    a, b, c, d = idx[:-1, :-1], idx[:-1, 1:], idx[1:, :-1], idx[1:, 1:]
-    faces = np.concatenate([np.stack([a, b, d], -1).reshape(-1, 3), np.stack([a, d, c], -1).reshape(-1, 3)])
+    z_up, faces = bumpy_sphere(np.random.default_rng(seed), n_triangles)
+    verts = z_up[:, [0, 2, 1]] + np.array([0.0, 1.0, 0.0])      # y up, resting on the floor
     quad = np.array([[0, 1, 2], [0, 2, 3]])
     floor = np.array([[-5, 0, -5], [5, 0, -5], [5, 0, 5], [-5, 0, 5]], float)
     light = np.array([[-1, 4, -1], [-1, 4, 1], [1, 4, 1], [1, 4, -1]], float)
     shapes = [
-        Shape("mesh", Bsdf("diffuse"), vertices=verts.reshape(-1, 3), faces=faces.astype(np.int64)),
+        Shape("mesh", Bsdf("diffuse"), vertices=verts, faces=faces.astype(np.int64)),
         Shape("mesh", Bsdf("diffuse"), vertices=floor, faces=quad),
         Shape("mesh", Bsdf("diffuse", reflectance=np.zeros(3)), vertices=light, faces=quad,
               emitter_radiance=np.full(3, 10.0)),
