@@ -34,7 +34,7 @@ def mesh_shape(mesh: meshes.TriangleMesh, to_world: np.ndarray, *, bsdf: Bsdf, s
         faces = faces[:, ::-1].copy()
         normals = None if normals is None else -normals
     return Shape(kind="mesh", bsdf=bsdf, vertices=vertices, faces=faces, normals=normals,
-                 flip_normals=flip_normals, source=source)
+                 uvs=mesh.uvs, flip_normals=flip_normals, source=source)
 
 
 def sphere_shape(center, radius: float, to_world: np.ndarray, *, bsdf: Bsdf, source: Source,
@@ -59,9 +59,22 @@ def bounds(shapes: list[Shape]) -> tuple[np.ndarray, np.ndarray] | None:
         if shape.kind == "sphere":
             lo.append(shape.center - shape.radius)
             hi.append(shape.center + shape.radius)
+        elif shape.kind == "cylinder":
+            box = cylinder_bounds(shape.to_world)
+            lo.append(box[0])
+            hi.append(box[1])
         else:
             lo.append(shape.vertices.min(axis=0))
             hi.append(shape.vertices.max(axis=0))
     if not lo:
         return None
     return np.min(lo, axis=0), np.max(hi, axis=0)
+
+
+def cylinder_bounds(to_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Box around the unit cylinder (radius 1, z in [0, 1]) under `to_world`: the boxes of its two end
+    circles (Mitsuba's bound)."""
+    m = np.asarray(to_world, np.float64)
+    half = np.sqrt(m[:3, 0] ** 2 + m[:3, 1] ** 2)      # extent of a transformed unit circle per axis
+    p0, p1 = m[:3, 3], m[:3, 3] + m[:3, 2]
+    return np.minimum(p0, p1) - half, np.maximum(p0, p1) + half
