@@ -38,7 +38,10 @@ inline int medium_after(const SceneData *sc, const SurfacePoint *s, float3 w, in
 inline int camera_start_medium(const SceneData *sc, float3 *o, float3 d, float *t_max, int medium) {
 #if VOLCL_HAS_MEDIUM_BOUNDARIES
     __global const RenderParams *rp = sc->params;
-    float3 pinhole = (float3)(rp->cam_to_world[3], rp->cam_to_world[7], rp->cam_to_world[11]);
+    /* where the ray leaves the camera (the pinhole, a point of the lens, or of the orthographic
+     * camera's plane): back from the near clip along d, by near_clip in the camera's z units */
+    float3 fwd = (float3)(rp->cam_to_world[2], rp->cam_to_world[6], rp->cam_to_world[10]);
+    float3 pinhole = *o - (rp->near_clip * dot(fwd, fwd) / dot(d, fwd)) * d;
     /* behind by more than the spheres' self-intersection margin and triangle rounding, at any scale */
     float back = 1e-5f * (max_component(fabs(pinhole)) + rp->scene_radius);
     float3 p = pinhole - back * d;
@@ -323,6 +326,14 @@ inline float3 integrator_radiance(const SceneData *sc, Rng *rng, float3 o, float
                 SurfacePoint s = surface_point(sc, &h, o, d);
                 __global const ShapeInfo *shape = &sc->shapes[s.shape];
                 float3 wo_world = -d;
+                if (rp->hide_emitters == HIDE_EMITTERS_SKIP && depth == 0 && shape->light >= 0) {
+                    /* Mitsuba's path and volpath: camera rays pass through area emitters */
+                    float3 next = offset_origin(s.p, s.mag, s.ng, d);
+                    if (t_max < INFINITY) t_max = fmax(t_max - dot(next - o, d), 0.0f);
+                    t_back = offset_back(next, s.p, s.ng, d);
+                    o = next;
+                    continue;
+                }
 #if VOLCL_HAS_AREA_LIGHTS
                 if (shape->light >= 0 && !(rp->hide_emitters && depth == 0)) {
                     float3 le = light_area_emission(&sc->lights[shape->light], s.ns, wo_world);
@@ -375,10 +386,11 @@ inline float3 integrator_radiance(const SceneData *sc, Rng *rng, float3 o, float
                 BsdfSample bs;
                 float u1 = rng_next_float(rng);
                 if (!bsdf_sample(bsdf, wo, u1, rng_next_float2(rng), &bs)) break;
+                /* As in Mitsuba, a direction that a shading normal sends to the other side of the
+                 * geometric surface than its own hemisphere is followed there: the medium and the
+                 * ray's offset follow the side it leaves on (geometric normal); ending such paths
+                 * darkened dielectric boundaries by up to 2% at grazing angles against Mitsuba. */
                 float3 wi = frame_to_world(bs.wi, ss, ts, s.ns);
-                /* a shading normal can send the sampled direction below the geometric surface; the ray
-                 * would then start on the wrong side, so such a path ends */
-                if (dot(wi, s.ng) * dot(bs.wi.z >= 0.0f ? s.ns : -s.ns, s.ng) < 0.0f) break;
                 beta *= bs.weight;
                 eta_scale *= bs.eta * bs.eta;
                 specular = bs.delta;

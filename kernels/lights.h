@@ -42,6 +42,12 @@ inline bool light_sample(const SceneData *sc, float3 ref, float u_pick, float2 u
 #if VOLCL_HAS_AREA_LIGHTS
     if (l->type == LIGHT_AREA) {
         float3 p, ng, ns;
+#if VOLCL_HAS_CYLINDERS
+        if (l->sphere >= 0 && analytic_is_cylinder(l->sphere)) {
+            cylinder_sample(&sc->cylinders[l->sphere - VOLCL_CYLINDER_CODE_BASE], u, &p, &ng);
+            ns = ng;
+        } else
+#endif
 #if VOLCL_HAS_SPHERES
         if (l->sphere >= 0) {
             __global const Sphere *sp = &sc->spheres[l->sphere];

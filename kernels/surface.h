@@ -16,6 +16,16 @@ typedef struct {
 __attribute__((always_inline))
 inline SurfacePoint surface_point(const SceneData *sc, const Hit *h, float3 o, float3 d) {
     SurfacePoint s;
+#if VOLCL_HAS_CYLINDERS
+    if (h->prim < 0 && analytic_is_cylinder(-h->prim - 1)) {
+        __global const Cylinder *c = &sc->cylinders[-h->prim - 1 - VOLCL_CYLINDER_CODE_BASE];
+        cylinder_hit_frame(c, o, d, h->t, &s.p, &s.ng);
+        s.ns = s.ng;
+        s.shape = c->shape;
+        s.mag = cylinder_magnitude(c);
+        return s;
+    }
+#endif
 #if VOLCL_HAS_SPHERES
     if (h->prim < 0) {
         __global const Sphere *sp = &sc->spheres[-h->prim - 1];

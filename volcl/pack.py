@@ -16,6 +16,7 @@ from .features import detect
 from .grids import GridPacker
 from .mesh import triangle_areas32
 from .scene.model import Camera, Filter, Scene
+from .scene.shapes import cylinder_bounds
 
 FILTER_TABLE_SIZE = 4097
 
@@ -132,9 +133,22 @@ def filter_cdf_size(table: np.ndarray) -> int:
     return (len(table) + 1) // 2
 
 
+def hide_emitters_mode(scene: Scene) -> str:
+    """How camera rays treat emitters (kernels/types.h HIDE_EMITTERS_*): Mitsuba's path, volpath and
+    direct pass through area emitters when hiding them; volpathmis (and Nori) only skip their
+    emission."""
+    integ = scene.integrator
+    if not integ.hide_emitters:
+        return "off"
+    return "skip" if scene.dialect == "mitsuba" and integ.kind in ("path", "volpath", "direct") else "dark"
+
+
 def camera_tangents(cam: Camera) -> tuple[float, float]:
-    """tan(fov/2) along x and y from Mitsuba's fov_axis rules."""
+    """tan(fov/2) along x and y from Mitsuba's fov_axis rules; (1, height / width) for an
+    orthographic camera, whose frame spans x in [-1, 1]."""
     w, h = cam.width, cam.height
+    if cam.kind == "orthographic":
+        return 1.0, h / w
     t = math.tan(math.radians(cam.fov) / 2)
     axis = cam.fov_axis
     if axis == "smaller":
@@ -181,7 +195,15 @@ def pack(scene: Scene, features: dict | None = None, max_leaf: int = 4, majorant
     for i, s in enumerate(sphere_shapes):
         spheres[i]["center"], spheres[i]["radius"] = s.center, s.radius
         spheres[i]["shape"], spheres[i]["flip"] = shape_index[id(s)], int(s.flip_normals)
-    sphere_of_shape = {id(s): i for i, s in enumerate(sphere_shapes)}
+    cylinder_shapes = [s for s in scene.shapes if s.kind == "cylinder"]
+    cylinders = np.zeros(max(len(cylinder_shapes), 1), layout.CYLINDER)
+    for i, s in enumerate(cylinder_shapes):
+        cylinders[i]["to_world"] = s.to_world[:3, :4].reshape(12)
+        cylinders[i]["to_object"] = np.linalg.inv(s.to_world)[:3, :4].reshape(12)
+        cylinders[i]["shape"], cylinders[i]["flip"] = shape_index[id(s)], int(s.flip_normals)
+    # analytic index of each analytic shape (kernels/cylinder.h): spheres, then cylinders from a base
+    analytic_of_shape = {id(s): i for i, s in enumerate(sphere_shapes)}
+    analytic_of_shape.update({id(s): layout.CYLINDER_CODE_BASE + i for i, s in enumerate(cylinder_shapes)})
 
     # lights: area lights first (one per emitting shape), then the scene's other emitters
     lights, light_cdf, light_tris = [], [], []
@@ -200,8 +222,12 @@ def pack(scene: Scene, features: dict | None = None, max_leaf: int = 4, majorant
         rec["value"] = s.emitter_radiance
         rec["sphere"] = -1
         if s.kind == "sphere":
-            rec["sphere"] = sphere_of_shape[id(s)]
+            rec["sphere"] = analytic_of_shape[id(s)]
             rec["area"] = 4 * math.pi * s.radius ** 2
+        elif s.kind == "cylinder":
+            # Mitsuba's area: 2 pi |to_world x| |to_world z| (exact for a circular cross-section)
+            rec["sphere"] = analytic_of_shape[id(s)]
+            rec["area"] = 2 * math.pi * np.linalg.norm(s.to_world[:3, 0]) * np.linalg.norm(s.to_world[:3, 2])
         else:
             # areas of the float32 triangles the kernel samples: a sliver that collapses in float32
             # must not be picked (kernels/lights.h)
@@ -244,7 +270,7 @@ def pack(scene: Scene, features: dict | None = None, max_leaf: int = 4, majorant
         r["interior"], r["exterior"] = mi(s.interior), mi(s.exterior)
         r["is_transition"] = int(s.interior is not None or s.exterior is not None)
 
-    # one BVH over triangles (codes >= 0) and spheres (codes < 0)
+    # one BVH over triangles (codes >= 0) and analytic shapes (codes < 0: -(analytic index + 1))
     lo = [tri_v.min(axis=1)] if ntri else []
     hi = [tri_v.max(axis=1)] if ntri else []
     codes = [np.arange(ntri, dtype=np.int32)]
@@ -254,6 +280,11 @@ def pack(scene: Scene, features: dict | None = None, max_leaf: int = 4, majorant
         lo.append(c - r)
         hi.append(c + r)
         codes.append(-1 - np.arange(len(sphere_shapes), dtype=np.int32))
+    if cylinder_shapes:
+        boxes = [cylinder_bounds(s.to_world) for s in cylinder_shapes]
+        lo.append(np.array([b[0] for b in boxes]))
+        hi.append(np.array([b[1] for b in boxes]))
+        codes.append((-1 - layout.CYLINDER_CODE_BASE - np.arange(len(cylinder_shapes))).astype(np.int32))
     codes = np.concatenate(codes)
     t0 = time.perf_counter()
     if len(codes):
@@ -278,10 +309,15 @@ def pack(scene: Scene, features: dict | None = None, max_leaf: int = 4, majorant
     params["tan_half"] = camera_tangents(cam)
     params["near_clip"], params["far_clip"] = cam.near_clip, cam.far_clip
     params["width"], params["height"] = cam.width, cam.height
+    params["camera_type"] = layout.CAMERA_TYPES[cam.kind]
+    params["aperture_radius"], params["focus_distance"] = cam.aperture_radius, cam.focus_distance
+    params["principal_point"] = cam.principal_point
     integ = scene.integrator
     params["max_depth"] = integ.max_depth
     params["rr_depth"] = integ.rr_depth
-    params["hide_emitters"] = int(integ.hide_emitters)
+    params["hide_emitters"] = layout.HIDE_EMITTERS[hide_emitters_mode(scene)]
+    params["emitter_samples"], params["bsdf_samples"] = integ.emitter_samples, integ.bsdf_samples
+    params["integrator"] = layout.INTEGRATORS["direct" if integ.kind == "direct" else "path"]
     params["specular_chains_only"] = int(integ.specular_chains_only)
     params["camera_medium"] = mi(cam.medium)
     params["light_count"] = len(lights)
@@ -297,6 +333,7 @@ def pack(scene: Scene, features: dict | None = None, max_leaf: int = 4, majorant
 
     arrays = {
         "nodes": nodes, "prim_ids": prim_ids, "triangles": tris, "normals": normals, "spheres": spheres,
+        "cylinders": cylinders,
         "shapes": shape_arr, "bsdfs": _pack_bsdfs(bsdfs), "lights": light_arr,
         "light_tri_cdf": np.asarray(light_cdf or [1.0], np.float32),
         "light_tris": np.asarray(light_tris or [0], np.int32),
@@ -306,4 +343,5 @@ def pack(scene: Scene, features: dict | None = None, max_leaf: int = 4, majorant
     }
     feats = features if features is not None else detect(scene)
     stats = {"grid_voxels": grids.voxels, "majorant_cells": grids.majorant_count}
+    stats["cylinders"] = len(cylinder_shapes)
     return Packed(arrays, params, feats, ntri, len(sphere_shapes), bvh_seconds, stats)
