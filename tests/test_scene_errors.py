@@ -144,7 +144,6 @@ MITSUBA_CASES = {
                         "'Au'", '"none"'),
     "unknown ior name": ('<bsdf type="dielectric"><string name="int_ior" value="glass"/></bsdf>',
                          2, "'glass'", "bk7", "acrylic glass", "polypropylene"),
-    "area emitter at top level": ('<emitter type="area"/>', 2, "inside the <shape>"),
     "point emitter in shape": ('<shape type="cube">\n<emitter type="point"/></shape>', 3,
                                "only an area emitter"),
     "medium without interior name": ('<shape type="cube">\n<medium type="homogeneous"/></shape>',

@@ -179,9 +179,10 @@ def render_job(job: Job, opts, device, stop: StopRequest, load_scene, defines, f
     from .render import Renderer
     out = check_writable(job.output)
     scene = load_scene(job.scene)
-    # --spp caps --time-limit and --target-error; without any of the three, the scene's spp applies
+    # --spp caps --time-limit and --target-error; without it the scene's spp caps a time limit (the
+    # render stops at whichever comes first), while a target error runs until it is met
     time_limit, target_error = getattr(opts, "time_limit", None), getattr(opts, "target_error", None)
-    spp = opts.spp or (None if time_limit or target_error else scene.spp)
+    spp = opts.spp or (None if target_error else scene.spp)
     estimator = getattr(opts, "estimator", None)
     if estimator is not None and not estimator.nee and any(e.kind in ("point", "directional") for e in scene.emitters):
         print(f"volcl: warning: {job.scene}: with --nee off, point and directional lights are never found (no "
@@ -243,7 +244,11 @@ def render_job(job: Job, opts, device, stop: StopRequest, load_scene, defines, f
                 "version": __version__, "invalid_samples": result.invalid,
                 "tracking_cutoffs": result.tracking_cutoffs, "rel_error": float(result.rel_error),
                 "stop_reason": result.stop_reason, "estimator": renderer.estimator.describe()}
-    layers = {"variance": result.variance} if out.suffix.lower() == ".exr" else None
+    layers = None
+    if out.suffix.lower() == ".exr":
+        layers = {"variance": result.variance}
+        if scene.integrator.moment:     # Mitsuba's moment integrator: the samples' second moment too
+            layers["m2"] = result.second_moment
     write_image(out, result.image, meta_out, layers)
     if complete and not opts.keep_checkpoint and ckpt.is_file():
         ckpt.unlink()

@@ -27,6 +27,10 @@ def _load(path, args):
     scene = load(path, _defines(args.define))
     if not isinstance(scene, Scene):
         raise VolclError(f"{path} is a Nori test file, not a scene; run it with `volcl test {path}`")
+    if getattr(args, "sensor", None) is not None:
+        from .scene.model import select_sensor
+        select_sensor(scene, args.sensor)
+        scene.warnings = [w for w in scene.warnings if "volcl renders the first" not in w]
     if args.width:
         scene.camera.width = args.width
     if args.height:
@@ -57,8 +61,8 @@ def _estimator(args):
 
 
 def _check_stopping(args):
-    """--spp caps --time-limit and --target-error; with neither of those the scene's own spp applies
-    (volcl.batch)."""
+    """--spp caps --time-limit and --target-error; without --spp the scene's own spp caps
+    --time-limit, and --target-error runs until it is met (volcl.batch)."""
     if args.time_limit is not None and args.time_limit <= 0:
         raise VolclError(f"--time-limit {args.time_limit}: expected a positive number of seconds")
     if args.target_error is not None and not args.target_error > 0:
@@ -190,6 +194,8 @@ def main(argv=None):
         sp.add_argument("--height", type=int)
         sp.add_argument("--device", help="device index P:D, name substring, 'cpu' or 'gpu' (default: $VOLCL_DEVICE)")
         sp.add_argument("--features", help="'all': compile every feature instead of only the scene's")
+        sp.add_argument("--sensor", type=int, metavar="N",
+                        help="render the scene's sensor N (0-based, in file order; default 0)")
         sp.add_argument("-v", "--verbose", action="store_true")
 
     def estimator_opts(sp):
@@ -218,7 +224,8 @@ def main(argv=None):
     r.add_argument("--keep-checkpoint", action="store_true",
                    help="keep the checkpoint of a finished render (to add samples later with --resume --spp)")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar (or progress lines in logs)")
-    r.add_argument("--time-limit", type=float, metavar="SECONDS", help="stop after this much render time")
+    r.add_argument("--time-limit", type=float, metavar="SECONDS",
+                   help="stop after this much render time (or at --spp, or the scene's spp, if sooner)")
     r.add_argument("--target-error", type=float, metavar="E",
                    help="stop once the image's estimated relative error is at most E (e.g. 0.02)")
     r.add_argument("--min-spp", type=int, default=16, metavar="N",

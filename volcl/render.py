@@ -55,6 +55,8 @@ class RenderResult:
     # biased estimate; never happens in ordinary scenes, see kernels/media.h)
     tracking_cutoffs: int = 0
     stop_reason: str = "spp"    # the rule that ended the render: 'spp', 'time' or 'error'
+    # (h, w, 3) float32 mean of the squared samples (Mitsuba's moment integrator writes it)
+    second_moment: np.ndarray | None = None
 
     @property
     def rel_error(self) -> float:
@@ -278,6 +280,7 @@ class Renderer:
         sample_var = np.maximum(ss[:, :3] / safe - mean ** 2, 0) * safe / np.maximum(safe - 1, 1)
         var_mean = sample_var / safe
         shape = (self.height, self.width, 3)
+        second_moment = (ss[:, :3] / safe).reshape(shape).astype(np.float32)
         return RenderResult(
             image=mean.reshape(shape).astype(np.float32), variance=var_mean.reshape(shape).astype(np.float32),
             spp=self.samples_done, invalid=int(st["invalid"].sum()), seconds=self.seconds,
@@ -285,7 +288,8 @@ class Renderer:
             build_seconds=self.build_seconds, tracking_cutoffs=int(st["cutoffs"].sum(dtype=np.uint64)),
             stats={"triangles": self.packed.triangle_count, "spheres": self.packed.sphere_count,
                    "bvh_seconds": self.packed.bvh_seconds, "features": describe(self.packed.features),
-                   **self.packed.stats})
+                   **self.packed.stats},
+            second_moment=second_moment)
 
 
 class _ErrorCheck:

@@ -218,6 +218,7 @@ class _Walk:
         if root.tag not in OBJECT_TAGS:
             raise root.error(f"an included file's root must be <scene> or an object such as <bsdf>, "
                              f"not <{root.tag}>")
+        root.attrs.pop("version", None)     # an included object's own root carries the file's version
         if "name" in el.attrs:
             root.attrs.setdefault("name", el.attrs["name"])
         if "id" in root.attrs:

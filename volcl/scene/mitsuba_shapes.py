@@ -58,9 +58,18 @@ def build_shape(node: Node):
     elif node.type == "cylinder":
         shape = _cylinder(node, to_world, bsdf, flip)
     else:
-        shape = mesh_shape(_mesh(node), to_world, bsdf=bsdf, source=node.source(),
-                           where=node.at("to_world"), face_normals=node.bool("face_normals", False),
-                           flip_normals=flip)
+        mesh = _mesh(node)
+        normal_matrix = node.normal_matrix("to_world")
+        if normal_matrix is not None and mesh.normals is not None and node.type not in PRIMITIVES:
+            node.ctx.warn(node.at("to_world"), "a rotate axis that is not of unit length also scales and shears "
+                                               "(Mitsuba uses it as given), and Mitsuba turns the mesh's vertex "
+                                               "normals with the rotate matrix itself rather than its inverse "
+                                               "transpose; volcl does the same")
+        face_normals = node.bool("face_normals", False)
+        shape = mesh_shape(mesh, to_world, bsdf=bsdf, source=node.source(), where=node.at("to_world"),
+                           face_normals=face_normals, flip_normals=flip, normal_matrix=normal_matrix)
+        if mesh.normals is None and not face_normals and node.type not in PRIMITIVES:
+            _smooth_normals(shape)
     _attach_emitter_and_media(node, shape, emitter)
     objects.check_shape(node, shape)
     shape.id = node.element.attrs.get("id", "")
@@ -73,12 +82,16 @@ def _mesh(node: Node) -> meshes.TriangleMesh:
     shape_index = node.int("shape_index", 0)
     if shape_index < 0:
         raise node.fail("shape_index", f"'shape_index' must be >= 0, got {shape_index}")
-    mesh = objects.mesh_from_file(node, "filename", node.type, shape_index)
-    if mesh.normals is None and not node.bool("face_normals", False):
-        normals = meshes.mitsuba_vertex_normals(mesh.vertices, mesh.faces)
-        if not meshes.normals_are_flat(mesh.vertices, mesh.faces, normals):
-            mesh = mesh._replace(normals=normals)
-    return mesh
+    return objects.mesh_from_file(node, "filename", node.type, shape_index)
+
+
+def _smooth_normals(shape: Shape) -> None:
+    """Mitsuba's vertex normals for a mesh file without them, computed as it computes them: from the
+    world-space vertices with the file's winding, negated by flip_normals afterwards."""
+    faces = shape.faces[:, ::-1] if shape.flip_normals else shape.faces
+    normals = meshes.mitsuba_vertex_normals(shape.vertices, faces)
+    if not meshes.normals_are_flat(shape.vertices, faces, normals):
+        shape.normals = -normals if shape.flip_normals else normals
 
 
 def _cylinder(node: Node, to_world: np.ndarray, bsdf, flip: bool) -> Shape:
@@ -116,6 +129,7 @@ def _attach_emitter_and_media(node: Node, shape, emitter) -> None:
                                         "point, directional and constant emitters go directly "
                                         "inside <scene>")
         shape.emitter_radiance = emitter.obj.radiance
+        emitter.obj.attached = True
     for child in node.objects("medium"):
         if child.name not in ("interior", "exterior"):
             raise child.element.error(f"a medium inside a shape needs name=\"interior\" or "

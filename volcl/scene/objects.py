@@ -36,8 +36,9 @@ _VOLCL_IOR_NAMES = {"fused silica": 1.4585}
 
 @dataclass
 class AreaLight:
-    """An area emitter waiting to be attached to the shape it sits in."""
+    """An area emitter waiting to be attached to the shape it sits in (or refers to)."""
     radiance: np.ndarray
+    attached: bool = False
 
 
 @dataclass

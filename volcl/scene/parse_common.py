@@ -338,6 +338,12 @@ class Node:
     def transform(self, name: str) -> np.ndarray:
         return np.array(self.value(name, np.eye(4)), dtype=np.float64)
 
+    def normal_matrix(self, name: str) -> Optional[np.ndarray]:
+        """The 3x3 matrix Mitsuba takes normals to the world with, where it is not the inverse
+        transpose of the transform (volcl.scene.properties.parse_transform); None elsewhere."""
+        prop = self.props.get(name)
+        return None if prop is None else prop.normal_matrix
+
     # -- validated reading --------------------------------------------------------------------
 
     def positive(self, name: str, default: Optional[float] = None) -> float:

@@ -98,8 +98,12 @@ def build_scene(node: Node) -> Scene:
     emitters = []
     for child in node.objects("emitter"):
         if isinstance(child.obj, AreaLight):
-            raise child.element.error("an area emitter must be placed inside the <shape> that "
-                                      "emits")
+            # as in Mitsuba: a surface emitter emits from the shapes that refer to it (by id)
+            if not child.obj.attached:
+                ctx.warn(child.element, "an area emitter at the top level emits only from the shapes "
+                                        "that refer to it (<ref id=...> inside a <shape>), and no shape "
+                                        "does: it emits nothing, as in Mitsuba")
+            continue
         emitters.append(child.obj)
     scene = Scene(path=ctx.path, dialect="mitsuba",
                   integrator=integrator.obj if integrator else Integrator(),
@@ -127,8 +131,18 @@ def _default_sensor(node: Node, shapes) -> Sensor:
 
 def _check_integrator(node: Node, scene: Scene) -> None:
     integ = scene.integrator
+    if integ.kind == "volpath" and integ.hide_emitters and scene.media:
+        node.ctx.warn(node.element, "hide_emitters with volpath and media: camera rays pass through area "
+                                    "emitters as in Mitsuba, but volcl samples the medium beyond them, "
+                                    "which Mitsuba's volpath skips")
     if integ.kind != "direct":
         return
+    delta = [e for e in scene.emitters if e.kind in ("point", "directional")]
+    if integ.emitter_samples > 1 and delta:
+        node.ctx.warn(node.element, f"direct with emitter_samples={integ.emitter_samples}: Mitsuba 3.9 counts "
+                                    f"each sample of a point or directional light at full weight, so these "
+                                    f"lights come out {integ.emitter_samples}x as bright as with one sample; "
+                                    f"volcl renders what Mitsuba renders")
     # Mitsuba's direct integrator traces surfaces only: media are not sampled and a null boundary
     # is shaded like a surface; volcl refuses rather than render something else
     culprit = next((s for s in scene.shapes if s.bsdf.kind == "null" or s.interior or s.exterior), None)

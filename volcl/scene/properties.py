@@ -29,6 +29,8 @@ class Prop:
     tag: str
     value: object
     element: Element
+    # a transform's matrix for normals as Mitsuba 3 composes it (see parse_transform)
+    normal_matrix: object = None
 
 
 # The kernels compute in float32: a value beyond its range would reach them as infinity.
@@ -256,22 +258,42 @@ def parse_property(el: Element, rotate_axis_as_given: bool = False) -> Prop:
         return Prop(name, el.tag, xyz(el, f"'{name}'", 0.0), el)
     assert el.tag == "transform", el.tag
     check_attrs(el, ("name",))
-    return Prop(el.attrs["name"], el.tag, parse_transform(el, rotate_axis_as_given), el)
+    matrix, normal_matrix = parse_transform(el, rotate_axis_as_given, with_normal_matrix=True)
+    return Prop(el.attrs["name"], el.tag, matrix, el, normal_matrix)
 
 
-def parse_transform(el: Element, rotate_axis_as_given: bool = False) -> np.ndarray:
+def parse_transform(el: Element, rotate_axis_as_given: bool = False, with_normal_matrix: bool = False):
+    """The 4x4 matrix of a <transform>, its ops applied in document order.
+
+    with_normal_matrix: also the matrix that takes normals to the world, as Mitsuba 3 composes it.
+    Mitsuba keeps each op's inverse transpose beside its matrix and multiplies both, taking a
+    rotation's inverse transpose to be the rotation itself (src/core/transform.h). With the
+    rotate axis used as given, a rotate whose axis is not of unit length is no rotation, and its
+    normals then turn with the rotate matrix, not with its inverse transpose; elsewhere the two
+    agree with the exact inverse transpose of the whole matrix."""
     m = np.eye(4)
+    normal_m = np.eye(3)
+    skewed = False
     for op in el.children:
         reader = _TRANSFORM_OPS.get(op.tag)
         if reader is None:
             raise op.error(f"unknown transform operation <{op.tag}>; supported: "
                            + ", ".join(sorted(_TRANSFORM_OPS)))
         check_leaf(op)
-        m = (_rotate(op, normalize_axis=False) if op.tag == "rotate" and rotate_axis_as_given
-             else reader(op)) @ m
+        step = (_rotate(op, normalize_axis=False) if op.tag == "rotate" and rotate_axis_as_given
+                else reader(op))
+        m = step @ m
+        if op.tag == "rotate" and rotate_axis_as_given:
+            normal_step = step[:3, :3]
+            skewed |= not np.allclose(step[:3, :3] @ step[:3, :3].T, np.eye(3), atol=1e-9)
+        else:
+            normal_step = np.linalg.inv(step[:3, :3]).T if np.linalg.det(step[:3, :3]) != 0 else np.eye(3)
+        normal_m = normal_step @ normal_m
     if not tf.is_invertible(m):
         raise el.error(f"transform '{el.attrs['name']}' is singular or not finite (a scale of "
                        f"zero, or huge values?)")
+    if with_normal_matrix:
+        return m, (normal_m if skewed else None)
     return m
 
 

@@ -22,13 +22,20 @@ PRIMITIVES = {
 
 
 def mesh_shape(mesh: meshes.TriangleMesh, to_world: np.ndarray, *, bsdf: Bsdf, source: Source,
-               where: Element, face_normals: bool = False, flip_normals: bool = False) -> Shape:
+               where: Element, face_normals: bool = False, flip_normals: bool = False,
+               normal_matrix=None) -> Shape:
+    """normal_matrix: the 3x3 matrix that takes the file's normals to the world, where it is not
+    to_world's inverse transpose (Mitsuba's rotate with an axis not of unit length)."""
     vertices = tf.apply_point(to_world, mesh.vertices)
     if not (np.abs(vertices) <= FLOAT32_MAX).all():     # the kernels hold them as float32
         raise where.error("to_world moves vertices beyond the floating-point range")
     normals = None
     if mesh.normals is not None and not face_normals:
-        normals = tf.apply_normal(to_world, mesh.normals)
+        if normal_matrix is None:
+            normals = tf.apply_normal(to_world, mesh.normals)
+        else:
+            normals = np.asarray(mesh.normals, np.float64) @ np.asarray(normal_matrix).T
+            normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
     faces = mesh.faces.copy()
     if flip_normals:
         faces = faces[:, ::-1].copy()
