@@ -31,11 +31,11 @@ def load(path: Union[str, os.PathLike], defines: Optional[Mapping[str, str]] = N
     if "version" in root.attrs:
         expanded = mitsuba_files.expand(root, defines)
         ctx = Context(path, parse_mitsuba.DIALECT, elements=expanded.ids, resolver=expanded.resolver)
-        ctx.warnings.extend(expanded.warnings)
-    else:
-        substitute_parameters(root, defines, _DEFAULT_PARENTS)
-        ctx = Context(path, parse_nori.DIALECT,
-                      resolver=Resolver([os.path.dirname(os.path.abspath(path))]))
+        scene = read_object(ctx, root).obj
+        scene.warnings = expanded.warnings + scene.warnings
+        return scene
+    substitute_parameters(root, defines, _DEFAULT_PARENTS)
+    ctx = Context(path, parse_nori.DIALECT, resolver=Resolver([os.path.dirname(os.path.abspath(path))]))
     return read_object(ctx, root).obj
 
 

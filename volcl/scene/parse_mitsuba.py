@@ -111,6 +111,7 @@ def build_scene(node: Node) -> Scene:
                   warnings=ctx.warnings[node.first_warning:])
     select_sensor(scene, 0)
     _check_integrator(node, scene)
+    scene.warnings = ctx.warnings[node.first_warning:]
     return scene
 
 
