@@ -65,7 +65,7 @@ def candidates(folders):
 def short_error(message: str) -> str:
     """The part of a volcl or Mitsuba error a table can hold: what failed, not where."""
     message = " ".join(message.split())
-    for pattern in (r"unknown (\w+) type '([^']+)'", r"(unknown parameter '[^']+' for <[^>]+>)",
+    for pattern in (r"unknown (\w+) type '([^']+)'", r"(conductor material '[^']+' is not supported)", r"(unknown parameter '[^']+' for <[^>]+>)",
                     r"(instancing \([^)]*\) is not supported yet)", r"(cannot load \w+ '[^']+': file not found)",
                     r"(<\w+> is not allowed inside <[^>]+>)"):
         m = re.search(pattern, message)
@@ -111,11 +111,17 @@ def report_scene(path: Path, args, mts, tool, out_dir, device) -> Row:
     if mts is None:
         row.mitsuba = "not run (Mitsuba 3 not found)"
         return row
-    size = film_size(scene.camera.width, scene.camera.height, args.max_size) if scene else None
     name = re.sub(r"[^A-Za-z0-9_.-]", "_", row.file)
     refs = [out_dir / f"{name}_mitsuba_s{s}.exr" for s in args.seeds]
     t0 = time.perf_counter()
     try:
+        if scene is None:
+            # only whether Mitsuba can render it at all: one sample per pixel of a small film
+            mitsuba_ref.render_mitsuba(str(path), None, mts["python"], args.variant, 1, 0, repeat=1,
+                                       warmup=False, size=(16, 16), timeout=1800)
+            row.mitsuba = "renders"
+            return row
+        size = film_size(scene.camera.width, scene.camera.height, args.max_size)
         for s, ref in zip(args.seeds, refs):
             mitsuba_ref.render_mitsuba(str(path), str(ref), mts["python"], args.variant, args.spp, s,
                                        repeat=1, warmup=False, size=size, timeout=1800)
@@ -125,8 +131,6 @@ def report_scene(path: Path, args, mts, tool, out_dir, device) -> Row:
         row.mitsuba = "error: " + short_error(lines[-1] if lines else str(exc))
         if scene is not None:
             row.verdict = "Mitsuba error"
-        return row
-    if scene is None:
         return row
     tests = [out_dir / f"{name}_volcl_s{s}.exr" for s in args.seeds]
     t0 = time.perf_counter()

@@ -214,6 +214,9 @@ def _cases():
                                         + sensor(origin="0, 2.3, 3", target="0, 1.8, 0") + LIGHT.format(radiance=8)
                                         + FLOOR + '<emitter type="constant"><rgb name="radiance" value="0.2"/></emitter>'
                                         + '<shape type="sphere"><float name="radius" value="0.5"/></shape>')
+    s["path_ignores_media"] = scene_xml(PATH.format(depth=-1) + sensor() + LIGHT.format(radiance=8) + FLOOR + (
+        '<shape type="sphere"><float name="radius" value="0.7"/><bsdf type="null"/>'
+        '<medium type="homogeneous" name="interior"><float name="sigma_t" value="3"/></medium></shape>'))
     spp = {"blackbody": 256}
     return {name: (text, spp.get(name, 512), 256, "llvm_ad_spectral" if name == "blackbody" else VARIANT)
             for name, text in s.items()}

@@ -336,3 +336,12 @@ def test_blackbody_emitter(tmp_path):
               'name="radiance"><float name="temperature" value="6500"/></spectrum></emitter></shape>')
     rgb = s.shapes[0].emitter_radiance
     assert np.all(rgb > 0) and any("spectral variants" in w for w in s.warnings)
+
+
+def test_path_integrator_ignores_media_as_mitsubas_does(tmp_path):
+    body = ('<integrator type="path"><integer name="max_depth" value="3"/></integrator>' + SENSOR +
+            '<shape type="sphere"><bsdf type="null"/><medium type="homogeneous" name="interior"/></shape>')
+    s = scene(tmp_path, body)
+    assert s.media == [] and s.shapes[0].interior is None
+    assert any("ignores participating media" in w for w in s.warnings)
+    assert any("null surface as a bounce" in w for w in s.warnings)

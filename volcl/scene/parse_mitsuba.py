@@ -132,6 +132,8 @@ def _default_sensor(node: Node, shapes) -> Sensor:
 
 def _check_integrator(node: Node, scene: Scene) -> None:
     integ = scene.integrator
+    if integ.kind == "path":
+        _path_integrator(node, scene)
     if integ.kind == "volpath" and integ.hide_emitters and scene.media:
         node.ctx.warn(node.element, "hide_emitters with volpath and media: camera rays pass through area "
                                     "emitters as in Mitsuba, but volcl samples the medium beyond them, "
@@ -153,6 +155,24 @@ def _check_integrator(node: Node, scene: Scene) -> None:
                         + (f" (first: {where})" if where else "")
                         + ": Mitsuba's direct integrator ignores media and treats null boundaries as "
                           "surfaces; use volpath (max_depth 2 for direct lighting)")
+
+
+def _path_integrator(node: Node, scene: Scene) -> None:
+    """Mitsuba's path integrator is a surface integrator: it ignores participating media, and counts
+    a crossing of a null surface as a bounce."""
+    if scene.media or any(s.camera.medium for s in scene.sensors):
+        node.ctx.warn(node.element, "Mitsuba's path integrator ignores participating media (volpath "
+                                    "renders them); volcl renders what Mitsuba renders, without them")
+        for shape in scene.shapes:
+            shape.interior = shape.exterior = None
+        for sensor in scene.sensors:
+            sensor.camera.medium = None
+        scene.media = []
+    if scene.integrator.max_depth >= 0 and any(s.bsdf.kind == "null" for s in scene.shapes):
+        node.ctx.warn(node.element, "Mitsuba's path integrator counts each crossing of a null surface as "
+                                    "a bounce towards max_depth, volcl does not: paths through null "
+                                    "surfaces can be longer in volcl than in Mitsuba (use volpath, which "
+                                    "counts as volcl does)")
 
 
 def _positive_count(node: Node, name: str, default: int) -> int:
