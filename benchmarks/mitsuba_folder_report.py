@@ -3,8 +3,9 @@
     python benchmarks/mitsuba_folder_report.py FOLDER... [--spp 64] [--max-size 160]
         [--seeds 0 1] [--out DIR] [--markdown REPORT.md] [--mitsuba-python PY] [--variant V]
 
-Every .xml file under the folders is a candidate; files that another candidate includes (and
-files whose root is not <scene>) are listed as fragments and not rendered on their own. For each
+Every .xml file under the folders is a candidate; files that another candidate includes, files
+whose root is not <scene>, and scenes with neither a shape nor an include (parameter or material
+files) are listed as fragments and not rendered on their own. For each
 scene:
   1. volcl loads it (warnings counted; an error is reported with the element it names);
   2. Mitsuba 3 loads and renders it (in a subprocess, benchmarks/mitsuba_ref.py);
@@ -65,7 +66,7 @@ def candidates(folders):
 def short_error(message: str) -> str:
     """The part of a volcl or Mitsuba error a table can hold: what failed, not where."""
     message = " ".join(message.split())
-    for pattern in (r"unknown (\w+) type '([^']+)'", r"(conductor material '[^']+' is not supported)", r"(unknown parameter '[^']+' for <[^>]+>)",
+    for pattern in (r"(uses undefined parameter \$\w+)", r"unknown (\w+) type '([^']+)'", r"(conductor material '[^']+' is not supported)", r"(unknown parameter '[^']+' for <[^>]+>)",
                     r"(instancing \([^)]*\) is not supported yet)", r"(cannot load \w+ '[^']+': file not found)",
                     r"(<\w+> is not allowed inside <[^>]+>)"):
         m = re.search(pattern, message)
@@ -143,7 +144,7 @@ def report_scene(path: Path, args, mts, tool, out_dir, device) -> Row:
     proc = subprocess.run([sys.executable, str(tool), *map(str, refs), *map(str, tests), "--name", name],
                           capture_output=True, text=True)
     last = (proc.stdout.strip().splitlines() or ["FAIL no output"])[-1]
-    m = re.search(r"R=([0-9.]+) max\|z\|=([0-9.]+)", last)
+    m = re.search(r"R=([0-9.]+) max\|z\|=([0-9.]+|nan)", last)
     row.verdict = "PASS" if last.startswith("PASS") else "FAIL"
     row.agreement = (f"R = {m.group(1)}, max abs z = {m.group(2)}" if m else last) + \
         (f", {invalid} invalid samples" if invalid else "") + f" ({size[0]}x{size[1]}, {args.spp} spp)"
@@ -203,8 +204,12 @@ def main(argv=None):
             rows.append(Row(rel, verdict="fragment",
                             volcl=f"included by {included[path].relative_to(args.base)}"))
             continue
-        if not re.search(r"<scene[\s>]", _COMMENT.sub("", root)):
+        text = _COMMENT.sub("", root)
+        if not re.search(r"<scene[\s>]", text):
             rows.append(Row(rel, verdict="fragment", volcl="not a scene (its root is not <scene>)"))
+            continue
+        if not re.search(r"<(shape|include)[\s>/]", text):
+            rows.append(Row(rel, verdict="fragment", volcl="no shapes and no includes: a part of other scenes"))
             continue
         log(f"{rel} ...")
         rows.append(report_scene(path, args, mts, tool, out_dir, device))

@@ -117,7 +117,9 @@ def cmd_info(args):
     print(f"scene      {args.scene} ({scene.dialect} dialect)")
     print(f"camera     {cam.width}x{cam.height}, fov {cam.fov:g} ({cam.fov_axis}), filter {cam.rfilter.kind}")
     print(f"integrator {scene.integrator.kind}, max_depth {scene.integrator.max_depth}, spp {scene.spp}")
-    print(f"shapes     {len(scene.shapes)} ({packed.triangle_count} triangles, {packed.sphere_count} spheres)")
+    cylinders = packed.stats.get("cylinders", 0)
+    print(f"shapes     {len(scene.shapes)} ({packed.triangle_count} triangles, {packed.sphere_count} spheres"
+          + (f", {cylinders} cylinders)" if cylinders else ")"))
     kinds = ["area"] * sum(s.emitter_radiance is not None for s in scene.shapes) + [e.kind for e in scene.emitters]
     print(f"emitters   {len(kinds)}" + (f" ({', '.join(kinds)})" if kinds else ""))
     media_kinds = [m.kind + (f" ({_grid_text(m.sigma_t)})" if m.kind == "heterogeneous" else "") for m in scene.media]

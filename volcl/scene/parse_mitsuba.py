@@ -34,8 +34,10 @@ _INTEGRATOR_NOTES = {
 }
 
 SPECS = {
+    # films, filters and samplers at the top level do nothing until a sensor refers to them by id
     "scene": {None: Spec(attrs=("version", "id"), children=frozenset(
-        {"integrator", "sensor", "shape", "bsdf", "emitter", "medium", "volume", "phase"}))},
+        {"integrator", "sensor", "shape", "bsdf", "emitter", "medium", "volume", "phase", "film",
+         "rfilter", "sampler"}))},
     "integrator": {
         "path": Spec(_PATH_PARAMS, ignored=_INTEGRATOR_NOTES),
         "volpath": Spec(_PATH_PARAMS, ignored=_INTEGRATOR_NOTES),
