@@ -51,26 +51,24 @@ inline bool cylinder_intersect(__global const Cylinder *c, float3 o, float3 d, f
     /* a root this close to zero is the surface the ray just left (its origin was offset from it) */
     float3 w0 = (float3)(c->to_world[3], c->to_world[7], c->to_world[11]);
     float eps = 1e-6f * (length(o - w0) + length(affine_vector(c->to_world, (float3)(1.0f, 0.0f, 1.0f))));
-    float roots[2] = {tc - h, tc + h};
-    for (int i = 0; i < 2; ++i) {
-        float t = roots[i];
-        float z = lo.z + t * ld.z;
-        if (t > eps && t < tmax && z >= 0.0f && z <= 1.0f) {
-            *t_out = t;
-            return true;
-        }
+    /* the nearer root first: the far one counts where the near one misses the tube's length */
+    float t = tc - h;
+    float z = lo.z + t * ld.z;
+    if (!(t > eps && t < tmax && z >= 0.0f && z <= 1.0f)) {
+        t = tc + h;
+        z = lo.z + t * ld.z;
+        if (!(t > eps && t < tmax && z >= 0.0f && z <= 1.0f)) return false;
     }
-    return false;
+    *t_out = t;
+    return true;
 }
 
-/* Point and normal of the hit at distance t; the point is projected back onto the tube (o + t d
- * carries the rounding of t). */
-inline void cylinder_hit_frame(__global const Cylinder *c, float3 o, float3 d, float t, float3 *p, float3 *n) {
-    float3 l = affine_point(c->to_object, o + t * d);
+/* The point of the tube nearest to world point x (the hit o + t d carries the rounding of t), in the
+ * cylinder's frame: on the unit circle, z clamped to [0, 1]. */
+inline float3 cylinder_local_surface(__global const Cylinder *c, float3 x) {
+    float3 l = affine_point(c->to_object, x);
     float r = sqrt(l.x * l.x + l.y * l.y);
-    float3 on = r > 0.0f ? (float3)(l.x / r, l.y / r, 0.0f) : (float3)(1.0f, 0.0f, 0.0f);
-    *p = affine_point(c->to_world, (float3)(on.x, on.y, clamp(l.z, 0.0f, 1.0f)));
-    *n = cylinder_world_normal(c, on);
+    return r > 0.0f ? (float3)(l.x / r, l.y / r, clamp(l.z, 0.0f, 1.0f)) : (float3)(1.0f, 0.0f, clamp(l.z, 0.0f, 1.0f));
 }
 
 /* The coordinates' magnitude a hit point on the tube was computed from (SurfacePoint.mag). */
@@ -82,12 +80,11 @@ inline float cylinder_magnitude(__global const Cylinder *c) {
     return max_component(base + reach);
 }
 
-/* A point uniform in (phi, z) on the tube: phi = 2 pi u.y, z = u.x (Mitsuba's sample_position). */
-inline void cylinder_sample(__global const Cylinder *c, float2 u, float3 *p, float3 *n) {
+/* A point uniform in (phi, z) on the tube, in its frame: phi = 2 pi u.y, z = u.x (Mitsuba's
+ * sample_position). */
+inline float3 cylinder_local_sample(float2 u) {
     float phi = 2.0f * VOLCL_PI * u.y;
-    float3 on = (float3)(cos(phi), sin(phi), 0.0f);
-    *p = affine_point(c->to_world, (float3)(on.x, on.y, u.x));
-    *n = cylinder_world_normal(c, on);
+    return (float3)(cos(phi), sin(phi), u.x);
 }
 
 #endif

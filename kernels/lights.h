@@ -44,7 +44,10 @@ inline bool light_sample(const SceneData *sc, float3 ref, float u_pick, float2 u
         float3 p, ng, ns;
 #if VOLCL_HAS_CYLINDERS
         if (l->sphere >= 0 && analytic_is_cylinder(l->sphere)) {
-            cylinder_sample(&sc->cylinders[l->sphere - VOLCL_CYLINDER_CODE_BASE], u, &p, &ng);
+            __global const Cylinder *c = &sc->cylinders[l->sphere - VOLCL_CYLINDER_CODE_BASE];
+            float3 q = cylinder_local_sample(u);
+            p = affine_point(c->to_world, q);
+            ng = cylinder_world_normal(c, (float3)(q.x, q.y, 0.0f));
             ns = ng;
         } else
 #endif
