@@ -176,7 +176,7 @@ def _already_rendered(out: Path, scene_path, defines: dict, spp: int, scene, see
 def render_job(job: Job, opts, device, stop: StopRequest, load_scene, defines, features):
     """Render one scene into job.output, updating job. Raises VolclError for what a user can fix."""
     from .image import check_writable, write_image
-    from .render import Renderer
+    from .renderer import Renderer
     out = check_writable(job.output)
     scene = load_scene(job.scene)
     # --spp caps --time-limit and --target-error; without any of the three, the scene's spp applies

@@ -135,7 +135,7 @@ def cmd_info(args):
 def cmd_test(args):
     """Nori's t-test files: each scene's mean radiance against its reference value."""
     from . import device as devmod
-    from .render import Renderer
+    from .renderer import Renderer
     from .scene import load
     from .scene.model import TTest
     test = load(args.file, _defines(args.define))

@@ -25,7 +25,7 @@ import numpy as np
 from .accuracy import relative_mse, time_to_error
 from .errors import VolclError
 from .estimator import CHOICES, Estimator, applicable_choices
-from .render import Renderer
+from .renderer import Renderer
 from .scene.model import Scene
 
 TARGETS = (0.10, 0.03, 0.01)
