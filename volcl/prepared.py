@@ -80,7 +80,8 @@ class Scene:
         self.version = 0                # counts applied updates
         self._uploads: dict = {}        # Device -> DeviceScene
         self._lock = threading.Lock()
-        self._parameters = None         # volcl.params.SceneParameters, made by traverse()
+        from .params import Pending
+        self.pending = Pending()        # values set through volcl.traverse, not yet applied
 
     def __repr__(self) -> str:
         m = self.model

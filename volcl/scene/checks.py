@@ -109,3 +109,25 @@ def direction(value: np.ndarray) -> np.ndarray:
     if not np.any(d):
         raise CheckError("the direction is the zero vector")
     return d
+
+
+def shape_rules(shape, name: str) -> None:
+    """Rules for a finished shape (`name`: how messages call it) that no single parameter decides:
+    an area emitter needs a mesh with some area (in the float32 the kernels compute in; its
+    triangles are sampled by area), and an interior medium needs a closed, consistently wound mesh
+    around it (the kernels tell inside from outside by the side each triangle is crossed from)."""
+    from .. import mesh as meshes
+    if shape.kind != "mesh":
+        return
+    if shape.emitter_radiance is not None:
+        areas = meshes.triangle_areas32(shape.vertices, shape.faces)
+        if not areas.sum() > 0:
+            raise CheckError(f"{name} carries an area emitter but its mesh has zero total area (all "
+                             f"{len(areas)} triangles are degenerate in single precision): an emitter "
+                             f"needs triangles of positive area")
+    if shape.interior is not None:
+        problem = meshes.closure_problem(shape.vertices, shape.faces)
+        if problem is not None:
+            raise CheckError(f"{name} has an interior medium, but {problem}; a medium must be enclosed by "
+                             f"a closed, consistently wound mesh (close the mesh, or give an open surface "
+                             f"only an exterior medium)")

@@ -104,24 +104,8 @@ def _shape_name(node: Node) -> str:
 
 
 def check_shape(node: Node, shape) -> None:
-    """Rules for a finished shape that no single parameter decides: an area emitter needs a mesh
-    with some area (in the float32 the kernels compute in; its triangles are sampled by area), and
-    an interior medium needs a closed, consistently wound mesh around it (the kernels tell inside
-    from outside by the side each triangle is crossed from)."""
-    if shape.kind != "mesh":
-        return
-    if shape.emitter_radiance is not None:
-        areas = meshes.triangle_areas32(shape.vertices, shape.faces)
-        if not areas.sum() > 0:
-            raise node.fail(None, f"{_shape_name(node)} carries an area emitter but its mesh has zero "
-                                  f"total area (all {len(areas)} triangles are degenerate in single "
-                                  f"precision): an emitter needs triangles of positive area")
-    if shape.interior is not None:
-        problem = meshes.closure_problem(shape.vertices, shape.faces)
-        if problem is not None:
-            raise node.fail(None, f"{_shape_name(node)} has an interior medium, but {problem}; a "
-                                  f"medium must be enclosed by a closed, consistently wound mesh "
-                                  f"(close the mesh, or give an open surface only an exterior medium)")
+    """Rules for a finished shape that no single parameter decides (volcl.scene.checks.shape_rules)."""
+    node.checked(None, checks.shape_rules, shape, _shape_name(node))
 
 
 def check_medium(node: Node, medium) -> None:
