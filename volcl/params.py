@@ -97,7 +97,7 @@ def _floats(param: Param, value, counts) -> np.ndarray:
         raise _type_error(param, value)
     a = a.astype(np.float64).reshape(-1)
     for x in a:
-        checks.finite(f"'{param.name}'", float(x))
+        checks.finite(f"'{param.name}'", float(x), str(x))
     return a
 
 
@@ -107,7 +107,7 @@ def convert(param: Param, value):
     if kind == "float":
         if not _number(value) and not (isinstance(value, np.ndarray) and value.size == 1):
             raise _type_error(param, value)
-        return checks.finite(f"'{param.name}'", float(value))
+        return checks.finite(f"'{param.name}'", float(value), str(value))
     if kind == "ior":
         if isinstance(value, str):
             key = value.strip().lower()
@@ -129,7 +129,7 @@ def convert(param: Param, value):
         if m.shape != (4, 4):
             raise _type_error(param, value)
         for x in m.reshape(-1):
-            checks.finite("matrix", float(x))
+            checks.finite("matrix", float(x), str(x))
         if np.abs(m[3] - [0, 0, 0, 1]).max() > 0:
             raise CheckError(f"matrix: the last row must be 0 0 0 1 (affine), got {m[3].tolist()}")
         return checks.invertible(param.name, m)
