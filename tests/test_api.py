@@ -453,3 +453,13 @@ def test_readme_python_example_runs(tmp_path):
                          timeout=600)
     assert run.returncode == 0, run.stdout + run.stderr
     assert (tmp_path / "fog.exr").is_file()
+
+
+def test_a_scene_pickles_without_its_uploads_and_renders_the_same(device):
+    """What a worker process receives: the model and its packed arrays, not the device buffers."""
+    import pickle
+    scene = load()
+    first = volcl.render(scene, seed=5, device=device)
+    copy = pickle.loads(pickle.dumps(scene))
+    assert copy.devices == [] and scene.devices == [device]
+    assert same(volcl.render(copy, seed=5, device=device), first)

@@ -83,6 +83,17 @@ class Scene:
         from .params import Pending
         self.pending = Pending()        # values set through volcl.traverse, not yet applied
 
+    def __getstate__(self):
+        """Pickled (to send a scene to another process or machine): the model, its packed arrays and
+        where it came from; uploads stay behind, each process makes its own."""
+        state = dict(self.__dict__)
+        state["_uploads"], state["_lock"] = {}, None
+        return state
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        self._lock = threading.Lock()
+
     def __repr__(self) -> str:
         m = self.model
         where = self.path or m.path
