@@ -155,7 +155,7 @@ def main(argv=None):
     mean = {n: float(np.mean(np.add(setup[n], render[n]))) for n in names}
     print(f"# Parameter sweep: {args.steps} steps of {args.key} over {low:g}..{high:g}, {path.name} at "
           f"{args.width}x{args.height}, {args.spp} spp\n")
-    print(f"device {dev.label}; CPU {cpu_model()}; `python benchmarks/param_sweep.py`; the three variants "
+    print(f"device {dev.label}; CPU {cpu_model()}; `python benchmarks/param_sweep.py`; the variants "
           f"interleaved step by step; update and reload images bit-identical at every step\n")
     print("| variant | seconds per step | of which: scene set-up | of which: render (upload, build, passes) "
           "| step time / update's |")
