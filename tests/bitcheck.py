@@ -3,12 +3,13 @@ and compare a later build's images with them exactly.
 
     python tests/bitcheck.py record DIR      # before the change
     python tests/bitcheck.py compare DIR     # after it: exit status 1 on any differing bit
+    (--only NAME,... : the cases whose names start with one of these, e.g. --only fog,cbox)
 
 Each scene renders small (48x36, 8 spp, seed 5) with the estimator choices that apply to it
 (volcl.estimator.applicable_choices) and once with every kernel feature compiled in, so the code
 behind every flag and estimator switch runs. Images are only comparable on the same device and
 driver: this is a tool for a change that must not change any image, not a test of correctness
-(pytest runs `compare` against a `record` made in the same session, tests/test_bitcheck.py).
+(tests/test_bitcheck.py checks that the tool itself catches a changed bit).
 """
 from __future__ import annotations
 
@@ -37,12 +38,15 @@ def _renderer_class():
     return Renderer
 
 
-def cases():
-    """(name, scene file, estimator choice or None, all features?) for every render the check makes."""
+def cases(only=None):
+    """(name, scene file, estimator choice or None, all features?) for every render the check makes
+    (or those whose names start with one of `only`)."""
     from volcl.estimator import applicable_choices
     from volcl.scene import load
     out = []
     for path in scene_files():
+        if only and not any(path.stem.startswith(o) for o in only):
+            continue
         scene = load(path)
         for choice in applicable_choices(scene):
             out.append((f"{path.stem}-{choice}", path, choice, False))
@@ -50,7 +54,7 @@ def cases():
     return out
 
 
-def render_all(device=None, names=None):
+def render_all(device=None, only=None):
     """{case name: (image, variance, invalid, cutoffs)}"""
     from volcl import device as devmod
     from volcl.estimator import CHOICES
@@ -59,9 +63,7 @@ def render_all(device=None, names=None):
     Renderer = _renderer_class()
     dev = devmod.choose(device)
     images = {}
-    for name, path, choice, every in cases():
-        if names is not None and name not in names:
-            continue
+    for name, path, choice, every in cases(only):
         scene = load(path)
         scene.camera.width, scene.camera.height = WIDTH, HEIGHT
         r = Renderer(scene, device=dev, seed=SEED, features=all_features() if every else None,
@@ -71,19 +73,19 @@ def render_all(device=None, names=None):
     return images
 
 
-def record(folder: Path, device=None):
+def record(folder: Path, device=None, only=None):
     folder.mkdir(parents=True, exist_ok=True)
-    for name, arrays in render_all(device).items():
+    for name, arrays in render_all(device, only).items():
         np.savez(folder / f"{name}.npz", image=arrays[0], variance=arrays[1], invalid=arrays[2],
                  cutoffs=arrays[3])
     return folder
 
 
-def compare(folder: Path, device=None) -> list[str]:
+def compare(folder: Path, device=None, only=None) -> list[str]:
     """Names of the renders that differ from the recorded ones (or have no record)."""
     recorded = {p.stem: p for p in folder.glob("*.npz")}
     bad = []
-    for name, arrays in render_all(device).items():
+    for name, arrays in render_all(device, only).items():
         if name not in recorded:
             bad.append(f"{name}: no recorded image")
             continue
@@ -101,15 +103,17 @@ def main(argv=None):
     p.add_argument("mode", choices=("record", "compare"))
     p.add_argument("folder", type=Path)
     p.add_argument("--device")
+    p.add_argument("--only", help="comma-separated prefixes of the case names to render")
     args = p.parse_args(argv)
+    only = args.only.split(",") if args.only else None
     if args.mode == "record":
-        record(args.folder, args.device)
+        record(args.folder, args.device, only)
         print(f"recorded {len(list(args.folder.glob('*.npz')))} renders in {args.folder}")
         return 0
-    bad = compare(args.folder, args.device)
+    bad = compare(args.folder, args.device, only)
     for line in bad:
         print(line)
-    print(f"{'FAILED' if bad else 'identical'}: {len(bad)} of {len(cases())} renders differ")
+    print(f"{'FAILED' if bad else 'identical'}: {len(bad)} of {len(cases(only))} renders differ")
     return 1 if bad else 0
 
 
