@@ -90,8 +90,7 @@ def main(argv=None):
     scene = volcl.load_string(with_value(values[0]), base_dir=path.parent, **size)
     volcl.render(scene, spp=1, device=dev)
     params = volcl.traverse(scene)
-    fresh_kind = (dev.platform_index, dev.device_index, dev.device, dev.platform_name)
-    volcl.render(scene, spp=1, device=volcl.Device(*fresh_kind))
+    volcl.render(scene, spp=1, device=dev.fresh())
 
     import os
     import subprocess
@@ -129,7 +128,7 @@ def main(argv=None):
 
         t0 = time.perf_counter()
         again = volcl.load_string(with_value(v), base_dir=path.parent, **size)
-        fresh = volcl.Device(*fresh_kind)
+        fresh = dev.fresh()
         t1 = time.perf_counter()
         volcl.render(again, seed=step, device=fresh)
         t2 = time.perf_counter()

@@ -26,7 +26,9 @@ def same(a, b):
 def private_device(device):
     """A Device of its own (own context and program cache) for the same OpenCL device, so that
     build counts do not depend on what other tests built."""
-    return volcl.Device(device.platform_index, device.device_index, device.device, device.platform_name)
+    other = device.fresh()
+    assert other is not device and other.key == device.key and other not in volcl.devices()
+    return other
 
 
 def text(value) -> str:

@@ -40,6 +40,12 @@ class Device:
     def __repr__(self) -> str:
         return f"<volcl.Device {self.key} {self.name!r} ({self.kind}, {self.platform_name})>"
 
+    def fresh(self) -> "Device":
+        """Another Device object for the same OpenCL device, with a context, queue and program cache
+        of its own (and so scene uploads of its own): for a thread that should not share this
+        one's queue. It is not in the list that devices() hands out."""
+        return Device(self.platform_index, self.device_index, self.device, self.platform_name)
+
     @property
     def key(self) -> str:
         return f"{self.platform_index}:{self.device_index}"
