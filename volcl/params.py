@@ -198,9 +198,7 @@ def _medium_params(scene: ModelScene, m: Medium, prefix: str):
     owner = _owner(f"<medium type=\"{m.kind}\">", m, "medium")
 
     def param(key, name, kind, get, put, shape=None):
-        def checked_put(value):
-            put(value)
-        return Param(f"{prefix}.{key}", name, kind, get, checked_put, ("media",), owner, shape)
+        return Param(f"{prefix}.{key}", name, kind, get, put, ("media",), owner, shape)
 
     def assign(**changes):
         """Set fields of the medium once the medium as a whole passes the combined checks."""
