@@ -88,7 +88,7 @@ def film_size(width: int, height: int, limit: int) -> tuple[int, int]:
 
 def render_volcl(scene_path, out, spp, seed, size, device):
     from volcl.image import write_image
-    from volcl.render import Renderer
+    from volcl.renderer import Renderer
     from volcl.scene import load
     scene = load(scene_path)
     scene.camera.width, scene.camera.height = size

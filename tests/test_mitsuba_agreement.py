@@ -20,7 +20,7 @@ import pytest
 
 from imagestats import assert_mean_matches
 from volcl.image import read_image
-from volcl.render import Renderer
+from volcl.renderer import Renderer
 from volcl.scene import load
 
 HERE = Path(__file__).resolve().parent

@@ -130,7 +130,7 @@ def _first_transition(scene: Scene, o: np.ndarray, d: np.ndarray):
 def _cylinder_hit(s, o: np.ndarray, d: np.ndarray, best_t: float):
     """(t, (shape, dot(d, ng))) of the nearest crossing of the open cylinder `s` closer than best_t,
     or None; as kernels/cylinder.h, in the cylinder's own frame."""
-    inv = np.linalg.inv(s.to_world)
+    inv = np.linalg.inv(s.cylinder)
     lo, ld = inv[:3, :3] @ o + inv[:3, 3], inv[:3, :3] @ d
     a = ld[0] ** 2 + ld[1] ** 2
     if not a > 0:

@@ -1,4 +1,5 @@
-"""Scene loading: `load(path)` reads a Mitsuba or Nori XML file into volcl.scene.model objects.
+"""Scene loading: `load(path)` reads a Mitsuba or Nori XML file into volcl.scene.model objects,
+`load_string(text)` the same from text.
 
 The dialect is decided per file by its root element: <scene version="..."> is Mitsuba (versions 2.x
 and 3.x as they are, older ones upgraded as Mitsuba 3 upgrades them), <scene> without a version or
@@ -14,9 +15,9 @@ from . import mitsuba_files, parse_mitsuba, parse_nori
 from .mitsuba_files import Resolver
 from .model import Scene, TTest
 from .parse_common import Context, read_object, substitute_parameters
-from .xml import Element, parse_file
+from .xml import Element, parse_bytes, parse_file
 
-__all__ = ["load"]
+__all__ = ["load", "load_string"]
 
 _DEFAULT_PARENTS = {"scene", "test"}
 
@@ -25,17 +26,29 @@ def load(path: Union[str, os.PathLike], defines: Optional[Mapping[str, str]] = N
          ) -> Union[Scene, TTest]:
     """Load a scene (or a Nori t-test file). `defines` are the CLI's -D name=value overrides."""
     path = os.fspath(path)
-    root = parse_file(path)
+    return _read(parse_file(path), path, os.path.dirname(os.path.abspath(path)), defines)
+
+
+def load_string(text: Union[str, bytes], base_dir: Union[str, os.PathLike, None] = None,
+                defines: Optional[Mapping[str, str]] = None, name: str = "<string>") -> Union[Scene, TTest]:
+    """Load a scene from XML text. Messages name the text `name`; files it refers to (meshes,
+    volumes, includes) are found relative to `base_dir` (default: the working folder)."""
+    data = text.encode("utf-8") if isinstance(text, str) else bytes(text)
+    folder = os.path.abspath(os.fspath(base_dir) if base_dir is not None else os.getcwd())
+    return _read(parse_bytes(data, name), os.path.join(folder, name), folder, defines)
+
+
+def _read(root: Element, path: str, folder: str, defines) -> Union[Scene, TTest]:
     defines = {str(k): str(v) for k, v in (defines or {}).items()}
     _check_root(root)
     if "version" in root.attrs:
-        expanded = mitsuba_files.expand(root, defines)
+        expanded = mitsuba_files.expand(root, defines, folder)
         ctx = Context(path, parse_mitsuba.DIALECT, elements=expanded.ids, resolver=expanded.resolver)
         scene = read_object(ctx, root).obj
         scene.warnings = expanded.warnings + scene.warnings
         return scene
     substitute_parameters(root, defines, _DEFAULT_PARENTS)
-    ctx = Context(path, parse_nori.DIALECT, resolver=Resolver([os.path.dirname(os.path.abspath(path))]))
+    ctx = Context(path, parse_nori.DIALECT, resolver=Resolver([folder]))
     return read_object(ctx, root).obj
 
 

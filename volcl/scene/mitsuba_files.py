@@ -82,13 +82,13 @@ def check_version(el: Element, version: tuple) -> None:
                        f"volcl reads (versions 0.x to 3.x; Nori files have no version)")
 
 
-def expand(root: Element, defines: Mapping[str, str]) -> MitsubaFile:
+def expand(root: Element, defines: Mapping[str, str], folder: Optional[str] = None) -> MitsubaFile:
     """Resolve <default>, $name, <include>, <path> and <alias> in place, in document order, and collect
     every id. `defines` (the CLI's -D) override the files' defaults; one that no file reads is an
-    error, as in Mitsuba."""
+    error, as in Mitsuba. `folder`: the scene's own folder (default: that of root.file)."""
     version = parse_version(root)
     check_version(root, version)
-    walk = _Walk(defines, os.path.abspath(root.file))
+    walk = _Walk(defines, root.file, folder or os.path.dirname(os.path.abspath(root.file)))
     walk.file(root, version, walk.scene_resolver, depth=0)
     unused = sorted(walk.fixed - walk.used)
     if unused:
@@ -99,14 +99,20 @@ def expand(root: Element, defines: Mapping[str, str]) -> MitsubaFile:
 
 
 class _Walk:
-    def __init__(self, defines: Mapping[str, str], main: str):
+    def __init__(self, defines: Mapping[str, str], main: str, folder: str):
         self.params = dict(defines)
         self.fixed = set(defines)
         self.used: set = set()
         self.ids: dict = {}
         self.warnings: list = []
-        self.stack = [main]              # files being read, for include cycles
-        self.scene_resolver = Resolver([os.path.dirname(main)])
+        self.main, self.folder = main, folder
+        self.stack = [os.path.join(folder, os.path.basename(main))]     # files being read (cycles)
+        self.scene_resolver = Resolver([folder])
+
+    def folder_of(self, el: Element) -> str:
+        """The folder an element's file lies in (the scene's folder for the scene, also when it was
+        loaded from text)."""
+        return self.folder if el.file == self.main else os.path.dirname(os.path.abspath(el.file))
 
     def warn(self, el: Element, message: str) -> None:
         self.warnings.append(f"{el.file}:{el.line}: <{el.label()}>: {message}")
@@ -179,12 +185,12 @@ class _Walk:
         if not at_root:
             raise el.error("<path> is only allowed directly inside the file's root element")
         value = el.attrs["value"]
-        folder = os.path.join(os.path.dirname(os.path.abspath(el.file)), value)
+        folder = os.path.join(self.folder_of(el), value)
         if not os.path.isdir(folder):
             folder = resolver.resolve(value) or folder
         if not os.path.isdir(folder):
             raise el.error(f"<path>: folder {value!r} not found (looked relative to "
-                           f"{os.path.dirname(os.path.abspath(el.file))} and in {resolver.describe()})")
+                           f"{self.folder_of(el)} and in {resolver.describe()})")
         resolver.folders.insert(0, os.path.normpath(folder))
 
     def include(self, el: Element, resolver: Resolver, depth: int) -> list:
@@ -192,7 +198,7 @@ class _Walk:
         check_leaf(el)
         filename = el.attrs["filename"]
         inner = resolver.copy()
-        inner.folders.insert(0, os.path.dirname(os.path.abspath(el.file)))
+        inner.folders.insert(0, self.folder_of(el))
         path = inner.resolve(filename)
         if path is None or not os.path.isfile(path):
             raise el.error(f"included file {filename!r} not found (looked in {inner.describe()})")

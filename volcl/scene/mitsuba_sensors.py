@@ -122,6 +122,7 @@ def build_sensor(node: Node) -> Sensor:
     elif kind == "thinlens":
         _thin_lens(node, camera, far)
     camera.medium = medium.obj if medium else None
+    camera.id = node.element.attrs.get("id", "")
     return Sensor(camera, sampler.sample_count, sampler.seed, node.source())
 
 

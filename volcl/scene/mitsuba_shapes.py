@@ -13,9 +13,7 @@ from .. import mesh as meshes
 from . import objects, transform as tf
 from .objects import AreaLight
 from .parse_common import Node, Spec
-from .properties import FLOAT32_MAX
-from .shapes import PRIMITIVES, mesh_shape, sphere_shape
-from .model import Shape
+from .shapes import PRIMITIVES, cylinder_shape, mesh_shape, sphere_shape
 
 _TO_WORLD = {"to_world": "transform"}
 _CHILDREN = frozenset({"bsdf", "emitter", "medium"})
@@ -65,11 +63,10 @@ def build_shape(node: Node):
                                                "(Mitsuba uses it as given), and Mitsuba turns the mesh's vertex "
                                                "normals with the rotate matrix itself rather than its inverse "
                                                "transpose; volcl does the same")
-        face_normals = node.bool("face_normals", False)
         shape = mesh_shape(mesh, to_world, bsdf=bsdf, source=node.source(), where=node.at("to_world"),
-                           face_normals=face_normals, flip_normals=flip, normal_matrix=normal_matrix)
-        if mesh.normals is None and not face_normals and node.type not in PRIMITIVES:
-            _smooth_normals(shape)
+                           face_normals=node.bool("face_normals", False), flip_normals=flip,
+                           smooth_normals=mesh.normals is None and node.type not in PRIMITIVES,
+                           normal_matrix=normal_matrix)
     _attach_emitter_and_media(node, shape, emitter)
     objects.check_shape(node, shape)
     shape.id = node.element.attrs.get("id", "")
@@ -85,16 +82,7 @@ def _mesh(node: Node) -> meshes.TriangleMesh:
     return objects.mesh_from_file(node, "filename", node.type, shape_index)
 
 
-def _smooth_normals(shape: Shape) -> None:
-    """Mitsuba's vertex normals for a mesh file without them, computed as it computes them: from the
-    world-space vertices with the file's winding, negated by flip_normals afterwards."""
-    faces = shape.faces[:, ::-1] if shape.flip_normals else shape.faces
-    normals = meshes.mitsuba_vertex_normals(shape.vertices, faces)
-    if not meshes.normals_are_flat(shape.vertices, faces, normals):
-        shape.normals = -normals if shape.flip_normals else normals
-
-
-def _cylinder(node: Node, to_world: np.ndarray, bsdf, flip: bool) -> Shape:
+def _cylinder(node: Node, to_world: np.ndarray, bsdf, flip: bool):
     """Mitsuba's cylinder: the unit cylinder (radius 1, z from 0 to 1, open at both ends) placed by
     translate(p0) * frame(p1 - p0) * scale(radius, radius, |p1 - p0|), then to_world."""
     p0 = node.point("p0", np.zeros(3))
@@ -108,10 +96,10 @@ def _cylinder(node: Node, to_world: np.ndarray, bsdf, flip: bool) -> Shape:
     s, t = tf.coordinate_system(d)
     frame = np.eye(4)
     frame[:3, 0], frame[:3, 1], frame[:3, 2] = s, t, d
-    m = to_world @ tf.translate(p0) @ frame @ tf.scale([radius, radius, length])
-    if not (tf.is_invertible(m) and (np.abs(m) <= FLOAT32_MAX).all()):
-        raise node.fail("to_world", "the cylinder's transform is singular or beyond the floating-point range")
-    lin = m[:3, :3]
+    frame = tf.translate(p0) @ frame @ tf.scale([radius, radius, length])
+    shape = cylinder_shape(frame, to_world, bsdf=bsdf, source=node.source(), where=node.at("to_world"),
+                           flip_normals=flip)
+    lin = shape.cylinder[:3, :3]
     gram = lin.T @ lin
     if abs(gram[0, 1]) > 1e-6 * gram[0, 0] or abs(gram[0, 0] - gram[1, 1]) > 1e-6 * gram[0, 0]:
         # Mitsuba intersects the same (elliptic) surface in its own frame, warns alike, and samples
@@ -119,7 +107,7 @@ def _cylinder(node: Node, to_world: np.ndarray, bsdf, flip: bool) -> Shape:
         node.ctx.warn(node.at("to_world"), "the cylinder's transform scales or shears its cross-section "
                                            "unevenly (Mitsuba warns too): it is intersected exactly, but as "
                                            "an emitter it is sampled as if circular, as in Mitsuba")
-    return Shape(kind="cylinder", bsdf=bsdf, to_world=m, flip_normals=flip, source=node.source())
+    return shape
 
 
 def _attach_emitter_and_media(node: Node, shape, emitter) -> None:
@@ -129,6 +117,7 @@ def _attach_emitter_and_media(node: Node, shape, emitter) -> None:
                                         "point, directional and constant emitters go directly "
                                         "inside <scene>")
         shape.emitter_radiance = emitter.obj.radiance
+        shape.emitter_id = emitter.element.attrs.get("id", "")
         emitter.obj.attached = True
     for child in node.objects("medium"):
         if child.name not in ("interior", "exterior"):

@@ -68,6 +68,8 @@ class Bsdf:
     twosided: bool = False
     id: str = ""
     source: Optional[Source] = None
+    # a two-sided bsdf is a copy of the one it wraps; edits of that one's values reach it too
+    twosided_of: Optional["Bsdf"] = None
 
 
 @dataclass
@@ -82,13 +84,25 @@ class Shape:
     uvs: Optional[np.ndarray] = None          # (n, 2) texture coordinates from the mesh file, or None
     center: Optional[np.ndarray] = None       # sphere, world space
     radius: float = 0.0
-    to_world: Optional[np.ndarray] = None     # cylinder: maps the unit cylinder (radius 1, z in [0, 1])
+    cylinder: Optional[np.ndarray] = None     # cylinder: the 4x4 map of the unit cylinder (radius 1,
+                                              # z in [0, 1]) to the world, to_world @ local
     flip_normals: bool = False
     emitter_radiance: Optional[np.ndarray] = None   # area emitter on this shape
     interior: Optional[Medium] = None
     exterior: Optional[Medium] = None
     id: str = ""
     source: Optional[Source] = None
+    # What the world-space fields were made from (volcl.scene.shapes places it again when the
+    # transform is edited): the object-space mesh (a volcl.mesh.TriangleMesh), sphere
+    # (center, radius) or cylinder frame (4x4), the to_world matrix, whether the file asked for face
+    # normals, whether a mesh file without normals gets Mitsuba's computed ones, and the matrix
+    # its normals turn with where that is not to_world's inverse transpose (Mitsuba's rotate).
+    local: object = None
+    to_world: np.ndarray = field(default_factory=lambda: np.eye(4))
+    face_normals: bool = False
+    smooth_normals: bool = False
+    normal_matrix: Optional[np.ndarray] = None
+    emitter_id: str = ""             # the area emitter's own id, if it has one
 
 
 @dataclass
@@ -98,6 +112,7 @@ class Emitter:
     position: Optional[np.ndarray] = None
     direction: Optional[np.ndarray] = None    # directional: direction the light travels
     source: Optional[Source] = None
+    id: str = ""
 
 
 @dataclass
@@ -122,6 +137,7 @@ class Camera:
     principal_point: tuple = (0.0, 0.0)   # Mitsuba's principal_point_offset_x/y, in image fractions
     aperture_radius: float = 0.0     # thin lens
     focus_distance: float = 0.0      # thin lens: distance along the view axis that is in focus
+    id: str = ""
 
 
 @dataclass

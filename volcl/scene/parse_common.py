@@ -14,7 +14,7 @@ from typing import Callable, Mapping, Optional
 import numpy as np
 
 from ..errors import VolclError
-from . import spectra
+from . import checks, spectra
 from .model import Source, rgb
 from .spectra import Spectrum
 from .properties import Prop, check_attrs, check_leaf, parse_property
@@ -301,6 +301,13 @@ class Node:
     def fail(self, name: Optional[str], message: str) -> VolclError:
         return self.at(name).error(message)
 
+    def checked(self, name: Optional[str], rule, *args):
+        """rule(*args) from volcl.scene.checks, its CheckError blamed on parameter `name`."""
+        try:
+            return rule(*args)
+        except checks.CheckError as exc:
+            raise self.fail(name, str(exc)) from None
+
     def value(self, name: str, default=None):
         prop = self.props.get(name)
         if prop is None:
@@ -347,10 +354,7 @@ class Node:
     # -- validated reading --------------------------------------------------------------------
 
     def positive(self, name: str, default: Optional[float] = None) -> float:
-        value = self.float(name, default)
-        if not value > 0:
-            raise self.fail(name, f"'{name}' must be > 0, got {value}")
-        return value
+        return self.checked(name, checks.positive, name, self.float(name, default))
 
     def choice(self, name: str, options, default: Optional[str] = None) -> str:
         value = self.string(name, default)
@@ -359,16 +363,10 @@ class Node:
         return value
 
     def nonneg_color(self, name: str, default=None, kind: str = "reflectance") -> np.ndarray:
-        value = self.color(name, default, kind)
-        if (value < 0).any():
-            raise self.fail(name, f"'{name}' must be >= 0, got {value.tolist()}")
-        return value
+        return self.checked(name, checks.nonneg_color, name, self.color(name, default, kind))
 
     def unit_color(self, name: str, default=None, kind: str = "reflectance") -> np.ndarray:
-        value = self.color(name, default, kind)
-        if (value < 0).any() or (value > 1).any():
-            raise self.fail(name, f"'{name}' must lie in [0, 1], got {value.tolist()}")
-        return value
+        return self.checked(name, checks.unit_color, name, self.color(name, default, kind))
 
     # -- children -----------------------------------------------------------------------------
 

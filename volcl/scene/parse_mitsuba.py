@@ -13,7 +13,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from . import mitsuba_sensors, mitsuba_shapes, objects, transform as tf
+from . import checks, mitsuba_sensors, mitsuba_shapes, objects, transform as tf
 from .model import (Bsdf, Camera, Emitter, Integrator, Medium, Phase, Scene, Sensor, Volume, rgb,
                     select_sensor)
 from .objects import AreaLight
@@ -245,7 +245,8 @@ def _twosided(node: Node) -> Bsdf:
         raise inner[0].element.error(f"twosided cannot wrap a {inner[0].obj.kind} bsdf: only "
                                      f"materials without transmission can be two-sided")
     # A copy, so that a shared bsdf referenced elsewhere stays one-sided there.
-    return replace(inner[0].obj, twosided=True)
+    wrapped = inner[0].obj
+    return replace(wrapped, twosided=True, twosided_of=wrapped.twosided_of or wrapped)
 
 
 def _dielectric(node: Node) -> Bsdf:
@@ -300,9 +301,7 @@ def _directional(node: Node) -> Emitter:
         direction = node.point("direction")
     else:
         direction = tf.apply_vector(node.transform("to_world"), [0.0, 0.0, 1.0])
-    direction = tf.normalize(direction)
-    if not np.any(direction):
-        raise node.fail("direction", "the direction is the zero vector")
+    direction = node.checked("direction", checks.direction, direction)
     return Emitter("directional", node.nonneg_color("irradiance", 1.0, kind="emission"), direction=direction,
                    source=node.source())
 
@@ -317,7 +316,10 @@ _EMITTERS = {
 
 
 def build_emitter(node: Node):
-    return _EMITTERS[node.type](node)
+    emitter = _EMITTERS[node.type](node)
+    if isinstance(emitter, Emitter):
+        emitter.id = node.element.attrs.get("id", "")
+    return emitter
 
 
 # ---------------------------------------------------------------------------------------------

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .checks import FLOAT32_MAX, CheckError, finite, invertible
 from . import transform as tf
 from .spectra import Spectrum
 from .xml import Element
@@ -33,19 +34,16 @@ class Prop:
     normal_matrix: object = None
 
 
-# The kernels compute in float32: a value beyond its range would reach them as infinity.
-FLOAT32_MAX = float(np.finfo(np.float32).max)
+__all__ = ["FLOAT32_MAX", "Prop", "parse_property"]
 
 
 def parse_float(text: str, el: Element, what: str) -> float:
     text = text.strip()
-    value = float(text) if _FLOAT.match(text) else None
-    if value is None or not math.isfinite(value):
-        raise el.error(f"{what}: {text!r} is not a finite number")
-    if abs(value) > FLOAT32_MAX:
-        raise el.error(f"{what}: {text!r} is beyond the single-precision floating-point range volcl "
-                       f"renders in (|x| <= {FLOAT32_MAX:.7g})")
-    return value
+    value = float(text) if _FLOAT.match(text) else math.nan
+    try:
+        return finite(what, value, text)
+    except CheckError as exc:
+        raise el.error(str(exc)) from None
 
 
 def parse_floats(text: str, el: Element, what: str, counts: tuple[int, ...]) -> list[float]:
@@ -289,9 +287,10 @@ def parse_transform(el: Element, rotate_axis_as_given: bool = False, with_normal
         else:
             normal_step = np.linalg.inv(step[:3, :3]).T if np.linalg.det(step[:3, :3]) != 0 else np.eye(3)
         normal_m = normal_step @ normal_m
-    if not tf.is_invertible(m):
-        raise el.error(f"transform '{el.attrs['name']}' is singular or not finite (a scale of "
-                       f"zero, or huge values?)")
+    try:
+        invertible(el.attrs["name"], m)
+    except CheckError as exc:
+        raise el.error(str(exc)) from None
     if with_normal_matrix:
         return m, (normal_m if skewed else None)
     return m
