@@ -303,8 +303,8 @@ def test_cylinder(tmp_path):
               '<point name="p1" value="1, 0, 3"/><float name="radius" value="0.5"/></shape>')
     c = s.shapes[0]
     assert c.kind == "cylinder"
-    assert np.allclose(tf.apply_point(c.to_world, [1, 0, 0]), [1.5, 0, 0])
-    assert np.allclose(tf.apply_point(c.to_world, [0, 0, 1]), [1, 0, 3])
+    assert np.allclose(tf.apply_point(c.cylinder, [1, 0, 0]), [1.5, 0, 0])
+    assert np.allclose(tf.apply_point(c.cylinder, [0, 0, 1]), [1, 0, 3])
     s = scene(tmp_path, SENSOR + '<shape type="cylinder"><transform name="to_world"><scale x="2"/></transform>'
               '<medium type="homogeneous" name="interior"/></shape>')
     assert any("unevenly" in w for w in s.warnings)
