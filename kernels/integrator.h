@@ -69,7 +69,7 @@ inline int camera_start_medium(const SceneData *sc, float3 *o, float3 d, float *
  * are counted in *cutoffs). */
 inline float3 shadow_transmittance(const SceneData *sc, float3 o, float3 w, float t_max, int medium, Rng *rng,
                                    uint *cutoffs) {
-#if VOLCL_HAS_MEDIA || VOLCL_HAS_NULL_BSDF
+#if VOLCL_HAS_MEDIA || VOLCL_HAS_NULL_BSDF || VOLCL_HAS_MASK || VOLCL_HAS_THINDIELECTRIC
     float3 tr = (float3)(1.0f);
     float t_back = 0.0f;    /* from the boundary just crossed to the offset origin: see integrator_radiance */
     for (int i = 0; i < VOLCL_MAX_CROSSINGS; ++i) {
@@ -81,7 +81,10 @@ inline float3 shadow_transmittance(const SceneData *sc, float3 o, float3 w, floa
 #endif
         if (!hit) return tr;
         SurfacePoint s = surface_point(sc, &h, o, w);
-        if (sc->bsdfs[sc->shapes[s.shape].bsdf].type != BSDF_NULL) return (float3)(0.0f);
+        /* null surfaces pass everything, masks and panes a part (bsdf_vertex.h), others nothing */
+        float3 passed = surface_null_transmission(sc, &h, &s, w);
+        if (!(max_component(passed) > 0.0f)) return (float3)(0.0f);
+        tr *= passed;
         if (max_component(tr) <= 0.0f) return tr;
         medium = medium_after(sc, &s, w, medium);
         float3 next = offset_origin(s.p, s.mag, s.ng, w);
@@ -346,14 +349,14 @@ inline void path_null_crossing(const SceneData *sc, PathState *ps, const Surface
 /* Next-event estimation at a surface vertex, MIS against BSDF sampling. Delta BSDFs draw the same
  * random numbers without using them, so the sequence stays aligned whatever the vertex type. */
 inline void path_surface_nee(const SceneData *sc, Rng *rng, PathState *ps, const SurfacePoint *s,
-                             __global const Bsdf *bsdf, float3 wo, float3 ss, float3 ts, bool delta, uint *cutoffs) {
+                             const BsdfVertex *bsdf, float3 wo, bool delta, uint *cutoffs) {
     if (ps->do_nee && !delta) {
         LightSample ls;
         float u_pick = rng_next_float(rng);
         float2 ul = rng_next_float2(rng);
         if (light_sample(sc, s->p, u_pick, ul, &ls) && max_component(ls.value) > 0.0f) {
             float pdf;
-            float3 f = bsdf_eval(bsdf, wo, frame_to_local(ls.wi, ss, ts, s->ns), &pdf);
+            float3 f = bsdf_eval(bsdf, wo, ls.wi, &pdf);
             if (max_component(f) > 0.0f) {
                 ps->L += ps->beta * nee_contribution(sc, &ls, f, pdf, offset_origin(s->p, s->mag, s->ng, ls.wi),
                                                      medium_after(sc, s, ls.wi, ps->medium), rng, cutoffs);
@@ -401,23 +404,30 @@ inline int path_surface_event(const SceneData *sc, Rng *rng, PathState *ps, bool
         return PATH_CROSSED;
     }
 #endif
-    if (rp->max_depth >= 0 && ps->depth + 1 >= rp->max_depth) return PATH_END;
+    /* at the depth limit a path still passes through masks and panes: Mitsuba's null events are
+     * no bounce */
+    bool at_limit = rp->max_depth >= 0 && ps->depth + 1 >= rp->max_depth;
+    if (at_limit && !(bsdf->flags & BSDF_FLAG_PASSES)) return PATH_END;
 
-    float3 ss, ts;
-    make_frame(s.ns, &ss, &ts);
-    float3 wo = frame_to_local(wo_world, ss, ts, s.ns);
-    bool delta = bsdf_is_delta(bsdf);
-    path_surface_nee(sc, rng, ps, &s, bsdf, wo, ss, ts, delta, cutoffs);
+    BsdfVertex bv = bsdf_vertex_at(sc, h, shape->bsdf, &s, wo_world);
+    bool delta = !bsdf_vertex_smooth(&bv);
+    if (!at_limit) path_surface_nee(sc, rng, ps, &s, &bv, wo_world, delta, cutoffs);
     if (rp->specular_chains_only && !delta) return PATH_END;
 
     BsdfSample bs;
     float u1 = rng_next_float(rng);
-    if (!bsdf_sample(bsdf, wo, u1, rng_next_float2(rng), &bs)) return PATH_END;
+    if (!bsdf_sample(&bv, wo_world, u1, rng_next_float2(rng), &bs)) return PATH_END;
+    if (bs.null_event) {
+        ps->beta *= bs.weight;
+        path_null_crossing(sc, ps, &s);
+        return PATH_CROSSED;
+    }
+    if (at_limit) return PATH_END;
     /* As in Mitsuba, a direction that a shading normal sends to the other side of the geometric
      * surface than its own hemisphere is followed there: the medium and the ray's offset follow the
      * side it leaves on (geometric normal); ending such paths darkened dielectric boundaries by up
      * to 2% at grazing angles against Mitsuba. */
-    float3 wi = frame_to_world(bs.wi, ss, ts, s.ns);
+    float3 wi = bs.wi;
     ps->beta *= bs.weight;
     ps->eta_scale *= bs.eta * bs.eta;
     ps->specular = bs.delta;

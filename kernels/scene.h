@@ -18,6 +18,11 @@ typedef struct {
     __global const GridVolume *grids;   /* grid descriptors of heterogeneous media */
     __global const float *grid_data;    /* every grid's voxels and majorant cells, concatenated */
     __global const RenderParams *params;
+    __global const TriangleUv *tri_uvs;     /* texture coordinates of triangles whose bsdf reads them */
+    __global const UvMap *uv_maps;          /* parametrizations of spheres and disks */
+    __global const Texture *textures;
+    __global const float *texels;           /* every bitmap's texels, concatenated */
+    __global const float *bsdf_tables;      /* roughplastic transmittance tables */
 } SceneData;
 
 #endif

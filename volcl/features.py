@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .pack_materials import chain, textures_of
 from .scene.model import Scene, Volume
 
 FLAGS = (
@@ -26,6 +27,10 @@ FLAGS = (
     "THINLENS",             # a thin-lens camera (depth of field)
     "ORTHOGRAPHIC",         # an orthographic camera
     "DIRECT",               # Mitsuba's direct integrator instead of the volumetric path tracer
+    "ROUGHCONDUCTOR", "ROUGHDIELECTRIC", "PLASTIC", "ROUGHPLASTIC", "THINDIELECTRIC",
+    "MASK",                 # Mitsuba's mask (opacity) wrapper
+    "TEXTURES",             # a bsdf parameter given by a bitmap or checkerboard texture
+    "BUMP_MAPS",            # bump or normal maps
 )
 
 
@@ -46,7 +51,8 @@ def _chromatic(sigma_t) -> bool:
 
 def detect(scene: Scene) -> dict[str, bool]:
     """The features `scene` needs: every flag in FLAGS, True where some element uses it."""
-    bsdf_kinds = {s.bsdf.kind for s in scene.shapes}
+    bsdfs = [b for s in scene.shapes for b in chain(s.bsdf)]
+    bsdf_kinds = {b.kind for b in bsdfs}
     light_kinds = {e.kind for e in scene.emitters}
     media = _media_of(scene)
     f = dict.fromkeys(FLAGS, False)
@@ -60,6 +66,10 @@ def detect(scene: Scene) -> dict[str, bool]:
     f["DIELECTRIC"] = "dielectric" in bsdf_kinds
     f["CONDUCTOR"] = "conductor" in bsdf_kinds
     f["NULL_BSDF"] = "null" in bsdf_kinds
+    for kind in ("roughconductor", "roughdielectric", "plastic", "roughplastic", "thindielectric", "mask"):
+        f[kind.upper()] = kind in bsdf_kinds
+    f["TEXTURES"] = any(textures_of(b) for b in bsdfs)    # normal maps read theirs as colours
+    f["BUMP_MAPS"] = bool(bsdf_kinds & {"bumpmap", "normalmap"})
     f["AREA_LIGHTS"] = any(s.emitter_radiance is not None for s in scene.shapes)
     f["POINT_LIGHTS"] = "point" in light_kinds
     f["DIRECTIONAL_LIGHTS"] = "directional" in light_kinds

@@ -8,10 +8,12 @@ A `Packer` holds what depends on the scene's structure only (which objects exist
 uses which bsdf, light and media: the indices the arrays refer to each other by) and packs the
 arrays in parts, so that an edited value (volcl.params) repacks only the part it lives in:
 
-    geometry   triangles, normals, spheres, cylinders, BVH             vertex positions, transforms
+    geometry   triangles, normals, spheres, cylinders, BVH,            vertex positions, transforms
+               texture coordinates and parametrizations
     lights     light records, area-light triangle CDFs              emitter values, geometry
     shapes     per-shape bsdf, light and media indices              structure only
-    bsdfs      bsdf records                                         bsdf colours and IORs
+    bsdfs      bsdf records, textures and texels, bsdf tables       bsdf colours, IORs, roughness,
+                                                                    texture data (volcl.pack_materials)
     media      media records, grid descriptors and values           media coefficients, phase
     camera     the reconstruction filter's table                    the film's filter
 and the RenderParams record, which is small and repacked with every part.
@@ -29,23 +31,26 @@ from .bvh import build_bvh
 from .features import detect
 from .grids import GridPacker
 from .mesh import triangle_areas32
+from .pack_materials import MaterialPacker, reads_uv
 from .scene.model import Camera, Filter, Scene
+from .scene import transform as tf
 from .scene.shapes import cylinder_bounds
 
 FILTER_TABLE_SIZE = 4097
 
 # part -> the arrays it packs, in the order parts are packed (shapes name the lights)
 PARTS = {
-    "geometry": ("nodes", "prim_ids", "triangles", "normals", "spheres", "cylinders"),
+    "geometry": ("nodes", "prim_ids", "triangles", "normals", "spheres", "cylinders", "tri_uvs", "uv_maps"),
     "lights": ("lights", "light_tri_cdf", "light_tris"),
     "shapes": ("shapes",),
-    "bsdfs": ("bsdfs",),
+    "bsdfs": ("bsdfs", "textures", "texels", "bsdf_tables"),
     "media": ("media", "grids", "grid_data"),
     "camera": ("filter_table",),
 }
 # the kernel's buffer arguments, in order (kernels/render.cl)
 ARG_ORDER = ("nodes", "prim_ids", "triangles", "normals", "spheres", "cylinders", "shapes", "bsdfs", "lights",
-             "light_tri_cdf", "light_tris", "media", "grids", "grid_data", "params", "filter_table")
+             "light_tri_cdf", "light_tris", "media", "grids", "grid_data", "params", "filter_table", "tri_uvs",
+             "uv_maps", "textures", "texels", "bsdf_tables")
 
 
 @dataclass
@@ -66,23 +71,6 @@ def _index_by_identity(objs):
             index[id(o)] = len(out)
             out.append(o)
     return index, out
-
-
-def _pack_bsdfs(bsdfs):
-    arr = np.zeros(max(len(bsdfs), 1), layout.BSDF)
-    for i, b in enumerate(bsdfs):
-        r = arr[i]
-        r["type"] = layout.BSDF_TYPES[b.kind]
-        r["twosided"] = int(b.twosided)
-        r["eta"] = b.int_ior / b.ext_ior
-        if b.kind == "diffuse":
-            r["color"] = b.reflectance
-        elif b.kind == "conductor":
-            r["color"] = b.specular_reflectance
-            r["conductor_mirror"] = int(b.eta is None)
-            if b.eta is not None:
-                r["cond_eta"], r["cond_k"] = b.eta, b.k
-    return arr
 
 
 def _pack_media(media, grids: GridPacker):
@@ -182,7 +170,13 @@ class Packer:
         self.max_leaf = max_leaf
         self.majorant_cells = majorant_cells
         self.shape_index = {id(s): i for i, s in enumerate(scene.shapes)}
-        self.bsdf_index, self.bsdfs = _index_by_identity(s.bsdf for s in scene.shapes)
+        self.materials = MaterialPacker([s.bsdf for s in scene.shapes])
+        self.bsdf_index = self.materials.index
+        # texture coordinates only for shapes whose bsdf reads them; analytic uvs for spheres and disks
+        self.uv_shapes = {id(s) for s in scene.shapes if reads_uv(s.bsdf)}
+        self.uv_map_shapes = [s for s in scene.shapes if id(s) in self.uv_shapes
+                              and (s.kind == "sphere" or s.uv_map == "disk")]
+        self.uv_map_index = {id(s): i for i, s in enumerate(self.uv_map_shapes)}
         self.medium_index, self.media = _index_by_identity(
             [scene.camera.medium] + [m for s in scene.shapes for m in (s.interior, s.exterior)]
             + list(scene.media))
@@ -250,6 +244,8 @@ class Packer:
             sel = tri_n
             normals["n0"][:len(sel)], normals["n1"][:len(sel)], normals["n2"][:len(sel)] = \
                 sel[:, 0], sel[:, 1], sel[:, 2]
+        tris["uvs"] = -1
+        tri_uvs = self._triangle_uvs(tris)
 
         spheres = np.zeros(max(len(self.sphere_shapes), 1), layout.SPHERE)
         for i, s in enumerate(self.sphere_shapes):
@@ -290,7 +286,46 @@ class Packer:
         self.bvh_seconds = time.perf_counter() - t0
         self.triangle_count = ntri
         self.arrays.update(nodes=nodes, prim_ids=prim_ids, triangles=tris, normals=normals, spheres=spheres,
-                           cylinders=cylinders)
+                           cylinders=cylinders, tri_uvs=tri_uvs, uv_maps=self._uv_maps())
+
+    def _triangle_uvs(self, tris: np.ndarray) -> np.ndarray:
+        """Corner uvs of the triangles whose bsdf reads them (kernels/texcoords.h), and their index
+        in each Triangle record. A mesh without uvs gets Mitsuba's barycentric ones: (0, 0), (1, 0),
+        (0, 1) at the corners in the file's order (flip_normals reversed the corners)."""
+        rows = []
+        count = 0
+        for s in self.scene.shapes:
+            if s.kind != "mesh" or id(s) not in self.uv_shapes:
+                continue
+            m = len(s.faces)
+            if s.uvs is not None:
+                corner = np.asarray(s.uvs, np.float64)[s.faces]
+            else:
+                canonical = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+                corner = np.broadcast_to(canonical[::-1] if s.flip_normals else canonical, (m, 3, 2))
+            rows.append(corner.reshape(m, 6))
+            first = self.first_tri[id(s)]
+            tris["uvs"][first:first + m] = np.arange(count, count + m)
+            count += m
+        out = np.zeros(max(count, 1), layout.TRIANGLE_UV)
+        if rows:
+            out["uv"][:count] = np.concatenate(rows)
+        return out
+
+    def _uv_maps(self) -> np.ndarray:
+        """The unit sphere's or unit disk's frame of each analytic parametrization (texcoords.h)."""
+        out = np.zeros(max(len(self.uv_map_shapes), 1), layout.UV_MAP)
+        for i, s in enumerate(self.uv_map_shapes):
+            if s.kind == "sphere":
+                center, radius = s.local
+                frame = np.asarray(s.to_world, np.float64) @ tf.translate(center) @ tf.scale(radius)
+                out[i]["kind"] = layout.UV_MAP_KINDS["sphere"]
+            else:
+                frame = np.asarray(s.to_world, np.float64)
+                out[i]["kind"] = layout.UV_MAP_KINDS["disk"]
+            out[i]["to_world"] = frame[:3, :4].reshape(12)
+            out[i]["to_object"] = np.linalg.inv(frame)[:3, :4].reshape(12)
+        return out
 
     def _pack_lights(self):
         """Area lights first (one per emitting shape), then the scene's other emitters."""
@@ -355,10 +390,11 @@ class Packer:
             r["light"] = self.shape_light.get(id(s), -1)
             r["interior"], r["exterior"] = self.medium_id(s.interior), self.medium_id(s.exterior)
             r["is_transition"] = int(s.interior is not None or s.exterior is not None)
+            r["uv_map"] = self.uv_map_index.get(id(s), -1)
         self.arrays["shapes"] = shape_arr
 
     def _pack_bsdfs(self):
-        self.arrays["bsdfs"] = _pack_bsdfs(self.bsdfs)
+        self.arrays.update(self.materials.arrays())
 
     def _pack_media(self):
         grids = GridPacker(self.majorant_cells)

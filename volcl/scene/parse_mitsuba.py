@@ -13,8 +13,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from . import checks, mitsuba_sensors, mitsuba_shapes, objects, transform as tf
-from .model import (Bsdf, Camera, Emitter, Integrator, Medium, Phase, Scene, Sensor, Volume, rgb,
+from . import checks, mitsuba_bsdfs, mitsuba_sensors, mitsuba_shapes, objects, textures, transform as tf
+from .model import (Camera, Emitter, Integrator, Medium, Phase, Scene, Sensor, Volume, rgb,
                     select_sensor)
 from .objects import AreaLight
 from .parse_common import Dialect, Node, Spec, medium_list
@@ -37,7 +37,7 @@ SPECS = {
     # films, filters and samplers at the top level do nothing until a sensor refers to them by id
     "scene": {None: Spec(attrs=("version", "id"), children=frozenset(
         {"integrator", "sensor", "shape", "bsdf", "emitter", "medium", "volume", "phase", "film",
-         "rfilter", "sampler"}))},
+         "rfilter", "sampler", "texture"}))},
     "integrator": {
         "path": Spec(_PATH_PARAMS, ignored=_INTEGRATOR_NOTES),
         "volpath": Spec(_PATH_PARAMS, ignored=_INTEGRATOR_NOTES),
@@ -50,14 +50,8 @@ SPECS = {
     },
     **mitsuba_sensors.SPECS,
     "shape": mitsuba_shapes.SPECS,
-    "bsdf": {
-        "diffuse": Spec({"reflectance": "color"}),
-        "twosided": Spec(children=frozenset({"bsdf"})),
-        "dielectric": Spec({"int_ior": "ior", "ext_ior": "ior"}),
-        "conductor": Spec({"material": "string", "eta": "color", "k": "color",
-                           "specular_reflectance": "color"}),
-        "null": Spec(),
-    },
+    "bsdf": mitsuba_bsdfs.SPECS,
+    "texture": textures.SPECS,
     "emitter": {
         "area": Spec({"radiance": "color"}),
         "point": Spec({"intensity": "color", "position": "point", **_TO_WORLD}),
@@ -170,11 +164,12 @@ def _path_integrator(node: Node, scene: Scene) -> None:
         for sensor in scene.sensors:
             sensor.camera.medium = None
         scene.media = []
-    if scene.integrator.max_depth >= 0 and any(s.bsdf.kind == "null" for s in scene.shapes):
-        node.ctx.warn(node.element, "Mitsuba's path integrator counts each crossing of a null surface as "
-                                    "a bounce towards max_depth, volcl does not: paths through null "
-                                    "surfaces can be longer in volcl than in Mitsuba (use volpath, which "
-                                    "counts as volcl does)")
+    if scene.integrator.max_depth >= 0 and any(s.bsdf.kind in ("null", "mask", "thindielectric")
+                                               for s in scene.shapes):
+        node.ctx.warn(node.element, "Mitsuba's path integrator counts each crossing of a null surface (and "
+                                    "each pass through a mask or thin dielectric) as a bounce towards "
+                                    "max_depth, volcl does not: such paths can be longer in volcl than in "
+                                    "Mitsuba (use volpath, which counts as volcl does)")
 
 
 def _positive_count(node: Node, name: str, default: int) -> int:
@@ -230,53 +225,6 @@ def _moment(node: Node) -> Integrator:
 
 
 # ---------------------------------------------------------------------------------------------
-
-def _diffuse(node: Node) -> Bsdf:
-    reflectance = node.nonneg_color("reflectance", 0.5)
-    objects.warn_if_above_one(node, "reflectance", reflectance)
-    return Bsdf("diffuse", reflectance=reflectance)
-
-
-def _twosided(node: Node) -> Bsdf:
-    inner = node.objects("bsdf")
-    if len(inner) != 1:
-        raise node.fail(None, f"twosided wraps exactly one bsdf, found {len(inner)}")
-    if inner[0].obj.kind in ("dielectric", "null"):
-        raise inner[0].element.error(f"twosided cannot wrap a {inner[0].obj.kind} bsdf: only "
-                                     f"materials without transmission can be two-sided")
-    # A copy, so that a shared bsdf referenced elsewhere stays one-sided there.
-    wrapped = inner[0].obj
-    return replace(wrapped, twosided=True, twosided_of=wrapped.twosided_of or wrapped)
-
-
-def _dielectric(node: Node) -> Bsdf:
-    return Bsdf("dielectric", int_ior=objects.ior(node, "int_ior", "bk7"),
-                ext_ior=objects.ior(node, "ext_ior", "air"))
-
-
-def _conductor(node: Node) -> Bsdf:
-    material = node.string("material", "none")
-    if material != "none":
-        raise node.fail("material", f"conductor material {material!r} is not supported; "
-                        f"supported: \"none\" (a perfect mirror, or give eta and k as rgb)")
-    bsdf = Bsdf("conductor", specular_reflectance=node.nonneg_color("specular_reflectance", 1.0))
-    if node.has("eta") or node.has("k"):
-        # Mitsuba's defaults when either is given: eta 0, k 1 (which is itself a perfect mirror).
-        bsdf.eta = node.nonneg_color("eta", 0.0, kind="unbounded")
-        bsdf.k = node.nonneg_color("k", 1.0, kind="unbounded")
-    return bsdf
-
-
-_BSDFS = {"diffuse": _diffuse, "twosided": _twosided, "dielectric": _dielectric,
-          "conductor": _conductor, "null": lambda node: Bsdf("null")}
-
-
-def build_bsdf(node: Node) -> Bsdf:
-    bsdf = _BSDFS[node.type](node)
-    bsdf.id = node.element.attrs.get("id", "")
-    bsdf.source = node.source()
-    return bsdf
-
 
 # ---------------------------------------------------------------------------------------------
 
@@ -422,7 +370,8 @@ DIALECT = Dialect(
         "scene": build_scene, "integrator": build_integrator,
         "sensor": mitsuba_sensors.build_sensor, "film": mitsuba_sensors.build_film,
         "rfilter": mitsuba_sensors.build_rfilter, "sampler": mitsuba_sensors.build_sampler,
-        "shape": mitsuba_shapes.build_shape, "bsdf": build_bsdf, "emitter": build_emitter,
+        "shape": mitsuba_shapes.build_shape, "bsdf": mitsuba_bsdfs.build_bsdf, "emitter": build_emitter,
+        "texture": textures.build_texture,
         "medium": build_medium, "volume": build_volume, "phase": build_phase,
     },
     rotate_axis_as_given=True,
