@@ -134,16 +134,18 @@ inline float3 microfacet_sample(const Microfacet *d, float3 wi, float2 u, float 
             sin_phi = cos_phi * tmp;
             alpha2 = 1.0f / (sqr(cos_phi / d->au) + sqr(sin_phi / d->av));
         }
-        float cos_t, p;
+        /* tan^2 theta first: sin theta from 1 - cos^2 theta loses the digits a narrow lobe lives on */
+        float tan2 = d->type == MICROFACET_BECKMANN ? -alpha2 * log(1.0f - u.x) : alpha2 * u.x / (1.0f - u.x);
+        float cos_t = rsqrt(1.0f + tan2), sin_t = sqrt(tan2) * cos_t, p;
         if (d->type == MICROFACET_BECKMANN) {
-            cos_t = rsqrt(1.0f - alpha2 * log(1.0f - u.x));
             p = (1.0f - u.x) / (VOLCL_PI * d->au * d->av * fmax(cos_t * cos_t * cos_t, 1e-20f));
         } else {
-            float tan2 = alpha2 * u.x / (1.0f - u.x);
-            cos_t = rsqrt(1.0f + tan2);
             p = 1.0f / (VOLCL_PI * d->au * d->av * fmax(cos_t * cos_t * cos_t, 1e-20f) * sqr(1.0f + tan2 / alpha2));
         }
-        float sin_t = sqrt(fmax(1.0f - cos_t * cos_t, 0.0f));
+        if (!(sin_t <= 1.0f)) {     /* u.x at 1: the horizon */
+            sin_t = 1.0f;
+            cos_t = 0.0f;
+        }
         *pdf = p;
         return (float3)(cos_phi * sin_t, sin_phi * sin_t, cos_t);
     }

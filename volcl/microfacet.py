@@ -73,7 +73,8 @@ def _visible_slope_11(kind: str, cos_i, u):
     if kind == "beckmann":
         from scipy.special import erf, erfinv
         tan_i = np.sqrt(np.maximum(1 - cos_i ** 2, 0)) / cos_i
-        cot_i = 1 / tan_i
+        with np.errstate(divide="ignore"):
+            cot_i = 1 / tan_i       # inf at normal incidence, where erf gives 1
         maxval = erf(cot_i)
         u = np.clip(u, 1e-6, 1 - 1e-6)
         x = maxval - (maxval + 1) * erf(np.sqrt(-np.log(u[..., 0])))

@@ -84,6 +84,11 @@ def _dielectric(node: Node) -> Bsdf:
     if node.type == "roughdielectric":
         _differing_iors(node, bsdf)
         _microfacet(node, bsdf)
+        if not bsdf.sample_visible:
+            node.ctx.warn(node.at("sample_visible"), "roughdielectric with sample_visible=false: Mitsuba draws from a "
+                                                     "widened distribution but weights the samples as if drawn from "
+                                                     "the actual one, which biases its image; volcl renders what "
+                                                     "Mitsuba renders (leave sample_visible on for an unbiased one)")
     check_texture_names(node, ("specular_reflectance", "specular_transmittance")
                         + (("alpha", "alpha_u", "alpha_v") if node.type == "roughdielectric" else ()))
     return bsdf
