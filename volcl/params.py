@@ -238,8 +238,11 @@ def _bsdf_params(scene: ModelScene, bsdf: Bsdf, prefix: str, named=None):
             yield field_param(f"{name}.value", name, attr, kind, rule)
 
     for name, attr in _BSDF_COLOURS.get(bsdf.kind, ()):
-        rule = checks.nonneg_color
-        yield from textured(name, attr, "color", rule)
+        value = getattr(bsdf, attr)
+        if (name.startswith("specular_") and bsdf.kind not in ("conductor", "roughconductor")
+                and not isinstance(value, Texture) and np.all(np.asarray(value) == 1.0)):
+            continue        # Mitsuba lists these factors only where a file gives them
+        yield from textured(name, attr, "color", checks.nonneg_color)
     if bsdf.kind in _WITH_IORS:
         yield field_param("int_ior", "int_ior", "int_ior", "ior", checks.positive)
         yield field_param("ext_ior", "ext_ior", "ext_ior", "ior", checks.positive)

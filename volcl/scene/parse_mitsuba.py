@@ -166,9 +166,9 @@ def _path_integrator(node: Node, scene: Scene) -> None:
         scene.media = []
     if scene.integrator.max_depth >= 0 and any(s.bsdf.kind in ("null", "mask", "thindielectric")
                                                for s in scene.shapes):
-        node.ctx.warn(node.element, "Mitsuba's path integrator counts each crossing of a null surface (and "
-                                    "each pass through a mask or thin dielectric) as a bounce towards "
-                                    "max_depth, volcl does not: such paths can be longer in volcl than in "
+        node.ctx.warn(node.element, "Mitsuba's path integrator counts each crossing of a null surface as a "
+                                    "bounce towards max_depth (and each pass through a mask or thin "
+                                    "dielectric), volcl does not: such paths can be longer in volcl than in "
                                     "Mitsuba (use volpath, which counts as volcl does)")
 
 
