@@ -76,8 +76,12 @@ inline void bsdf_tilt(const SceneData *sc, __global const Bsdf *b, const Surface
 #endif
 
 /* The bsdf of record `index` at surface point s of hit h, seen from wo_w (towards the viewer).
- * Computes s's texture coordinates where the bsdf reads them. */
+ * Computes s's texture coordinates where the bsdf reads them. Forced inline only in optimized
+ * builds: forcing it at -O0 makes LLVM 14 mark the returned struct with
+ * llvm.experimental.noalias.scope.decl, which Oclgrind cannot run. */
+#ifdef __OPTIMIZE__
 __attribute__((always_inline))
+#endif
 inline BsdfVertex bsdf_vertex_at(const SceneData *sc, const Hit *h, int index, SurfacePoint *s, float3 wo_w) {
     BsdfVertex v;
     __global const Bsdf *b = &sc->bsdfs[index];
