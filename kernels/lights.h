@@ -31,15 +31,15 @@ inline float light_area_pdf(const SceneData *sc, int li, float3 ref, float3 p, f
  * in *pdf the density with which light sampling (the choice of the light included) draws d. */
 inline float3 light_env_emission(const SceneData *sc, float3 d, float *pdf) {
     __global const Light *l = &sc->lights[sc->params->env_light];
-    float choice = 1.0f / (float)sc->params->light_count;
+    float count = (float)sc->params->light_count;
 #if VOLCL_HAS_ENVMAP
     if (l->type == LIGHT_ENVMAP) {
         float3 le = envmap_eval(sc, l, d, pdf);
-        *pdf *= choice;
+        *pdf /= count;
         return le;
     }
 #endif
-    *pdf = VOLCL_INV_4PI * choice;
+    *pdf = VOLCL_INV_4PI / count;
     return vload_f3(l->value);
 }
 

@@ -195,6 +195,10 @@ def resolve(device=None) -> Device:
     raise TypeError(f"device: expected a volcl Device, a selector string or None, not {type(device).__name__}")
 
 
+# what to make smaller when one buffer is too large
+_BUFFER_FIX = {"env_data": "a smaller environment map", "grid_data": "coarser grids"}
+
+
 def _size(n: int) -> str:
     return f"{n / 2**20:.1f} MiB" if n < 2**30 else f"{n / 2**30:.2f} GiB"
 
@@ -211,7 +215,8 @@ def check_fits(info: Device, buffers: dict[str, int], accumulator_bytes: int = 0
         raise VolclError(f"the scene is too large for device {info.key} {info.name}: its {name} buffer "
                          f"needs {_size(biggest)} ({biggest} bytes), but the device allocates at most "
                          f"{_size(max_alloc)} ({max_alloc} bytes) in one buffer; simplify the scene "
-                         f"(fewer triangles) or choose a device with more memory (--device)")
+                         f"({_BUFFER_FIX.get(name, 'fewer triangles')}) or choose a device with more memory "
+                         f"(--device)")
     total = sum(buffers.values()) + accumulator_bytes
     if total > global_mem:
         raise VolclError(f"the scene is too large for device {info.key} {info.name}: its buffers and "

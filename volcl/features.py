@@ -177,6 +177,13 @@ def medium_at(scene: Scene, point) -> object:
 POINT_LIKE = ("point", "spot")
 
 
+def escapes_unbounded(scene: Scene, point) -> bool:
+    """Whether some probe ray from `point` leaves the scene without meeting a shape that names a
+    medium: the medium around the point then reaches to infinity that way."""
+    o = np.asarray(point, np.float64)
+    return any(_first_transition(scene, o, d) is None for d in _PROBES)
+
+
 def point_light_media(scene: Scene) -> list:
     """The medium around each point or spot light (None: vacuum), in the order of scene.emitters."""
     return [medium_at(scene, e.position) for e in scene.emitters if e.kind in POINT_LIKE]

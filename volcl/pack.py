@@ -337,7 +337,7 @@ class Packer:
                 light_tris.extend((self.first_tri[id(s)] + keep).tolist())
             self.shape_light[id(s)] = len(lights)
             lights.append(rec)
-        env_light, env_data = -1, []
+        env_light, env_data = -1, []     # env_data: the envmap's tables (one at most)
         environments = [e for e in self.scene.emitters if e.kind in ("constant", "envmap")]
         if len(environments) > 1 and any(e.kind == "envmap" for e in environments):
             raise VolclError("only one environment emitter (envmap or constant) can be in a scene, as in Mitsuba")
@@ -360,7 +360,7 @@ class Packer:
             elif e.kind == "envmap":
                 data, res, norm = self._envmap_tables(e)
                 rec["to_local"] = np.linalg.inv(np.asarray(e.to_world, np.float64)[:3, :3]).reshape(9)
-                rec["env_res"], rec["env_data"], rec["env_norm"] = res, sum(len(d) for d in env_data), norm
+                rec["env_res"], rec["env_data"], rec["env_norm"] = res, 0, norm   # the one environment
                 env_data.append(data)
                 env_light = len(lights)
             lights.append(rec)
@@ -370,7 +370,7 @@ class Packer:
         self.light_count, self.env_light = len(lights), env_light
         self.arrays.update(lights=light_arr, light_tri_cdf=np.asarray(light_cdf or [1.0], np.float32),
                            light_tris=np.asarray(light_tris or [0], np.int32),
-                           env_data=np.concatenate(env_data) if env_data else np.zeros(1, np.float32))
+                           env_data=env_data[0] if env_data else np.zeros(1, np.float32))
         self.stats["env_texels"] = sum(int(np.prod(e.image.shape[:2])) for e in environments if e.kind == "envmap")
 
     def _envmap_tables(self, e):

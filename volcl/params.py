@@ -53,6 +53,7 @@ KINDS = {
     "transform": "a <transform> (a 4x4 matrix)",
     "ior": "a <float> or a <string> material name",
     "grid": "a grid of values (a numpy array of the grid's shape)",
+    "image": "an image (a numpy array of the image's shape)",
 }
 
 
@@ -133,15 +134,17 @@ def convert(param: Param, value):
         if np.abs(m[3] - [0, 0, 0, 1]).max() > 0:
             raise CheckError(f"matrix: the last row must be 0 0 0 1 (affine), got {m[3].tolist()}")
         return checks.invertible(param.name, m)
-    if kind == "grid":
+    if kind in ("grid", "image"):
         if not isinstance(value, np.ndarray) or value.dtype.kind not in "iuf":
             raise _type_error(param, value)
         if value.shape != param.shape:
-            raise CheckError(f"'{param.name}' must keep the grid's shape {param.shape} (z, y, x, channels), "
-                             f"got {value.shape}; load another volume file to change it")
+            what, axes, source = (("grid", "z, y, x, channels", "volume") if kind == "grid"
+                                  else ("image", "height, width, channels", "image"))
+            raise CheckError(f"'{param.name}' must keep the {what}'s shape {param.shape} ({axes}), "
+                             f"got {value.shape}; load another {source} file to change it")
         a = np.array(value, dtype=np.float32)
         if not np.isfinite(a).all():
-            raise CheckError(f"'{param.name}': the grid holds values that are not finite numbers")
+            raise CheckError(f"'{param.name}': the {kind} holds values that are not finite numbers")
         return a
     raise AssertionError(kind)
 
@@ -255,14 +258,19 @@ def _medium_params(scene: ModelScene, m: Medium, prefix: str):
 
 def _emitter_params(scene: ModelScene, e: Emitter, prefix: str):
     owner = _owner(f"<emitter type=\"{e.kind}\">", e, "emitter")
-    name = {"point": "intensity", "directional": "irradiance", "constant": "radiance"}[e.kind]
+    if e.kind == "envmap":
+        yield from _envmap_params(e, prefix, owner)
+        return
+    name = {"point": "intensity", "spot": "intensity", "directional": "irradiance", "constant": "radiance"}[e.kind]
 
     def put_value(a):
         checks.nonneg_color(name, a)
         e.value = a
     yield Param(f"{prefix}.{name}.value", name, "color", lambda: np.array(e.value, np.float64), put_value,
                 ("lights",), owner)
-    if e.kind == "point":
+    if e.kind == "spot":
+        yield from _spot_params(e, prefix, owner)
+    elif e.kind == "point":
         def put_position(p):
             e.position = p
         yield Param(f"{prefix}.position", "position", "point", lambda: np.array(e.position, np.float64),
@@ -272,6 +280,52 @@ def _emitter_params(scene: ModelScene, e: Emitter, prefix: str):
             e.direction = checks.direction(d)
         yield Param(f"{prefix}.direction", "direction", "point", lambda: np.array(e.direction, np.float64),
                     put_direction, ("lights",), owner)
+
+
+def _spot_params(e: Emitter, prefix: str, owner):
+    def put_cutoff(v):
+        e.cutoff_angle = checks.spot_cutoff(v)
+
+    def put_beam(v):
+        e.beam_width = checks.spot_beam(v)
+
+    def put_to_world(m):
+        e.to_world = m
+        e.position = m[:3, 3].copy()
+    yield Param(f"{prefix}.cutoff_angle", "cutoff_angle", "float", lambda: float(e.cutoff_angle), put_cutoff,
+                ("lights",), owner)
+    yield Param(f"{prefix}.beam_width", "beam_width", "float", lambda: float(e.beam_width), put_beam,
+                ("lights",), owner)
+    yield Param(f"{prefix}.to_world", "to_world", "transform", lambda: e.to_world.copy(), put_to_world,
+                ("lights",), owner)
+
+
+def _envmap_params(e: Emitter, prefix: str, owner):
+    """Mitsuba's keys: scale, data (here the image as read, (height, width, channels); Mitsuba's
+    tensor has two more columns, copies of the seam), to_world."""
+    def put_scale(v):
+        if not v >= 0:
+            raise CheckError(f"'scale' must be >= 0, got {v}")
+        if float(np.max(e.image)) * v > checks.FLOAT32_MAX:
+            raise CheckError(f"the brightest texel times 'scale' {v:g} is beyond the single-precision range")
+        e.scale = v
+
+    def put_data(a):
+        bad = a < 0
+        if bad.any():
+            y, x, c = (int(i) for i in np.argwhere(bad)[0])
+            raise CheckError(f"'data' has a negative texel {float(a[y, x, c])!r} at x={x} y={y} channel={c}")
+        if float(np.max(a)) * e.scale > checks.FLOAT32_MAX:
+            raise CheckError("'data' times 'scale' reaches beyond the single-precision range")
+        e.image = a
+
+    def put_to_world(m):
+        e.to_world = checks.envmap_transform(m)
+    yield Param(f"{prefix}.scale", "scale", "float", lambda: float(e.scale), put_scale, ("lights",), owner)
+    yield Param(f"{prefix}.data", "data", "image", lambda: e.image.copy(), put_data, ("lights",), owner,
+                e.image.shape)
+    yield Param(f"{prefix}.to_world", "to_world", "transform", lambda: e.to_world.copy(), put_to_world,
+                ("lights",), owner)
 
 
 def _shape_params(scene: ModelScene, s: Shape, prefix: str):
@@ -413,7 +467,7 @@ class SceneParameters(Mapping):
         return key in self._params
 
     def kind(self, key) -> str:
-        """'float', 'color', 'point', 'transform', 'ior' or 'grid'."""
+        """'float', 'color', 'point', 'transform', 'ior', 'grid' or 'image'."""
         return self._param(key).kind
 
     def _param(self, key) -> Param:

@@ -119,6 +119,7 @@ def build_scene(node: Node) -> Scene:
                   warnings=ctx.warnings[node.first_warning:])
     select_sensor(scene, 0)
     _check_integrator(node, scene)
+    _environment_through_unbounded_medium(node, scene)
     scene.warnings = ctx.warnings[node.first_warning:]
     return scene
 
@@ -131,6 +132,25 @@ def _one_environment(node: Node) -> None:
         first = env[0].element
         raise env[1].element.error(f"only one environment emitter (envmap or constant) can be specified per "
                                    f"scene, as in Mitsuba; the first is at line {first.line}")
+
+
+def _environment_through_unbounded_medium(node: Node, scene: Scene) -> None:
+    """A camera medium that no shape bounds in some direction fills space out to infinity: no light
+    of an environment emitter gets through it (volcl's answer). Mitsuba 3.9 stops its shadow rays
+    towards the environment at twice the scene's bounding radius, so its next-event estimate sees
+    the environment dimmed over that distance only (while its phase-sampled rays never escape): a
+    different image, which depends on the scene's size."""
+    medium = scene.camera.medium
+    if medium is None or not any(e.kind in ("constant", "envmap") for e in scene.emitters):
+        return
+    from ..features import escapes_unbounded
+    if escapes_unbounded(scene, scene.camera.to_world[:3, 3]):
+        node.ctx.warn(node.element, "the camera's medium is not enclosed by a shape (it reaches to infinity in "
+                                    "some direction), so no light of the environment arrives through it; Mitsuba "
+                                    "3.9 counts the environment's direct light through such a medium as if it "
+                                    "ended at twice the scene's bounding radius (a brighter image, which depends "
+                                    "on the scene's size). Bound the medium with a shape (e.g. a null sphere) to "
+                                    "render the same image in both")
 
 
 def _default_sensor(node: Node, shapes) -> Sensor:
