@@ -73,6 +73,16 @@ def test_envmap_of_an_srgb_png(tmp_path):
     np.testing.assert_allclose(e.image, srgb_decode(codes / 255.0), rtol=1e-5, atol=1e-7)
 
 
+def test_envmap_of_a_radiance_hdr_file(tmp_path):
+    """RGBE (.hdr) files are linear: 8-bit mantissas under an exponent shared by the texel's channels,
+    so each channel is within 1/128 of the texel's largest one of what was written."""
+    written = sky() * 50.0
+    write_image(tmp_path / "sky.hdr", written)
+    (e,) = scene_file(tmp_path, ENVMAP.format(file="sky.hdr", extra="")).emitters
+    assert e.image.shape == (8, 16, 3)
+    assert np.all(np.abs(e.image - written) <= written.max(axis=-1, keepdims=True) / 128)
+
+
 def test_envmap_that_is_not_two_to_one_is_read_as_mitsuba_reads_it(tmp_path):
     write_image(tmp_path / "square.exr", sky(8, 8))
     sc = scene_file(tmp_path, ENVMAP.format(file="square.exr", extra=""))
