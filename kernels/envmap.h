@@ -31,16 +31,6 @@ typedef struct {
     float s, t;     /* the place in it, each in [0, 1] */
 } EnvPatch;
 
-inline float3 mat3_apply(const __global float *m, float3 v) {
-    return (float3)(m[0] * v.x + m[1] * v.y + m[2] * v.z, m[3] * v.x + m[4] * v.y + m[5] * v.z,
-                    m[6] * v.x + m[7] * v.y + m[8] * v.z);
-}
-
-inline float3 mat3_apply_transposed(const __global float *m, float3 v) {
-    return (float3)(m[0] * v.x + m[3] * v.y + m[6] * v.z, m[1] * v.x + m[4] * v.y + m[7] * v.z,
-                    m[2] * v.x + m[5] * v.y + m[8] * v.z);
-}
-
 /* The patch of a unit direction in the map's frame, whose sin(theta) is sin_theta. */
 inline EnvPatch envmap_patch(__global const Light *l, float3 d, float sin_theta) {
     int w = l->env_res[0], h = l->env_res[1];
