@@ -20,10 +20,7 @@ inline float3 direct_emission(const SceneData *sc, bool hit, const Hit *h, float
     *pdf_light = 0.0f;
     if (!hit) {
 #if VOLCL_HAS_ENV_LIGHTS
-        if (sc->params->env_light >= 0) {
-            *pdf_light = light_env_pdf(sc);
-            return vload_f3(sc->lights[sc->params->env_light].value);
-        }
+        if (sc->params->env_light >= 0) return light_env_emission(sc, d, pdf_light);
 #endif
         return (float3)(0.0f);
     }

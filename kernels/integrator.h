@@ -122,12 +122,13 @@ inline float3 nee_contribution(const SceneData *sc, const LightSample *ls, float
 }
 
 #if VOLCL_HAS_EQUIANGULAR
-/* Point lights in homogeneous media: equiangular sampling (equiangular.h) combined with free-flight
- * distance sampling by multiple importance sampling.
+/* Point and spot lights in homogeneous media: equiangular sampling (equiangular.h) combined with
+ * free-flight distance sampling by multiple importance sampling.
  *
  * On a medium segment o + t d, t in [0, t_seg], that a path with throughput beta enters, the light of
  * point light k scattered once towards the path is
- *     D_k = integral over [0, t_seg] of Tr(t) sigma_s phase(t) Tr_shadow(t) I_k / dist_k(t)^2 dt.
+ *     D_k = integral over [0, t_seg] of Tr(t) sigma_s phase(t) Tr_shadow(t) I_k(t) / dist_k(t)^2 dt
+ * (I_k(t): the intensity towards o + t d, a spot's falloff included).
  * Two techniques estimate it:
  *   - distance: the path's own free-flight sample t_d, density p_d (media.h; the mixture over colour
  *     channels for chromatic extinction; it lands inside the segment only with probability
@@ -180,7 +181,7 @@ inline float equiangular_weight(int tech, int mis, float pdf_e, float pdf_d) {
 /* weight of NEE towards a point light from the distance-sampled vertex at t */
 inline float equiangular_distance_weight(const SceneData *sc, const EquiangularSegmentState *es,
                                          __global const Medium *m, const LightSample *ls, float t) {
-    if (es->tech == EQ_NONE || sc->lights[ls->light].type != LIGHT_POINT) return 1.0f;
+    if (es->tech == EQ_NONE || !light_is_point_like(sc->lights[ls->light].type)) return 1.0f;
     if (es->tech == EQ_ONLY_EQUIANGULAR) return 0.0f;
     float pdf_e = sample_equiangular_pdf(es->o, es->d, es->t_seg, vload_f3(sc->lights[ls->light].position), t);
     float pdf_d = medium_distance_pdf(m, es->beta, t);
@@ -219,7 +220,7 @@ inline float3 equiangular_direct(const SceneData *sc, Rng *rng, const Equiangula
     float u = rng_next_float(rng);
     int li = min((int)(u_pick * (float)count), count - 1);
     __global const Light *l = &sc->lights[li];
-    if (l->type != LIGHT_POINT) return (float3)(0.0f);   /* other lights: NEE at the distance sample */
+    if (!light_is_point_like(l->type)) return (float3)(0.0f);   /* other lights: NEE at the distance sample */
     float3 lp = vload_f3(l->position);
     float t, pdf_e;
     if (!sample_equiangular(es->o, es->d, es->t_seg, lp, u, &t, &pdf_e)) return (float3)(0.0f);
@@ -236,7 +237,7 @@ inline float3 equiangular_direct(const SceneData *sc, Rng *rng, const Equiangula
     float3 sigma_t = vload_f3(m->sigma_t);
     float3 sigma_s = sigma_t * vload_f3(m->albedo);
     float ph = phase_eval(m, es->d, wi);
-    return transmittance_exp(sigma_t, t) * sigma_s * tr_shadow * vload_f3(l->value)
+    return transmittance_exp(sigma_t, t) * sigma_s * tr_shadow * light_point_intensity(l, -wi)
            * (ph * w * (float)count / (pdf_e * d2));
 }
 #endif
@@ -331,8 +332,10 @@ inline void path_escape(const SceneData *sc, PathState *ps) {
 #if VOLCL_HAS_ENV_LIGHTS
     __global const RenderParams *rp = sc->params;
     if (rp->env_light >= 0 && !(rp->hide_emitters && ps->depth == 0)) {
-        float w = ps->specular ? 1.0f : hit_weight(rp, ps->prev_pdf, light_env_pdf(sc));
-        ps->L += ps->beta * vload_f3(sc->lights[rp->env_light].value) * w;
+        float pdf_light;
+        float3 le = light_env_emission(sc, ps->d, &pdf_light);
+        float w = ps->specular ? 1.0f : hit_weight(rp, ps->prev_pdf, pdf_light);
+        ps->L += ps->beta * le * w;
     }
 #endif
 }

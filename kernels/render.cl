@@ -34,6 +34,7 @@ __kernel void render_pass(__global const BvhNode *nodes, __global const int *pri
                           __global const ShapeInfo *shapes,
                           __global const Bsdf *bsdfs, __global const Light *lights,
                           __global const float *light_tri_cdf, __global const int *light_tris,
+                          __global const float *env_data,
                           __global const Medium *media, __global const GridVolume *grids,
                           __global const float *grid_data, __global const RenderParams *params,
                           __global const float *filter_table, __global const TriangleUv *tri_uvs,
@@ -50,8 +51,8 @@ __kernel void render_pass(__global const BvhNode *nodes, __global const int *pri
     int px = tile_x + tp % tile_w, py = tile_y + tp / tile_w;
     int pixel = py * params->width + px;
     SceneData sc = {nodes, prim_ids, triangles, normals, spheres, cylinders, shapes, bsdfs, lights,
-                    light_tri_cdf, light_tris, media, grids, grid_data, params, tri_uvs, uv_maps, textures,
-                    texels, bsdf_tables};
+                    light_tri_cdf, light_tris, env_data, media, grids, grid_data, params, tri_uvs, uv_maps,
+                    textures, texels, bsdf_tables};
     Rng rng = rng_init(params->seed, (uint)pixel, sample_base + (uint)slot);
     float3 o, d;
     float t_max;

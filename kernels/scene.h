@@ -14,6 +14,7 @@ typedef struct {
     __global const Light *lights;
     __global const float *light_tri_cdf;    /* per area light: normalized prefix sums of triangle areas */
     __global const int *light_tris;
+    __global const float *env_data;     /* environment maps' texels and sampling tables (envmap.h) */
     __global const Medium *media;
     __global const GridVolume *grids;   /* grid descriptors of heterogeneous media */
     __global const float *grid_data;    /* every grid's voxels and majorant cells, concatenated */

@@ -179,6 +179,8 @@ typedef struct {
 #define LIGHT_POINT 1
 #define LIGHT_DIRECTIONAL 2
 #define LIGHT_CONSTANT 3
+#define LIGHT_ENVMAP 4
+#define LIGHT_SPOT 5
 
 typedef struct {
     int type;
@@ -186,12 +188,22 @@ typedef struct {
     int tri_count;
     int sphere;     /* area light on an analytic shape, else -1: a sphere's index, or a cylinder's index
                      * plus VOLCL_CYLINDER_CODE_BASE (the analytic index of cylinder.h) */
-    float value[3]; /* radiance (area, constant), intensity (point) or irradiance (directional) */
+    float value[3]; /* radiance (area, constant), intensity (point, spot), irradiance (directional); envmap: 1 */
     float area;     /* total emitting area (area lights) */
-    float position[3];  /* point light position */
+    float position[3];  /* point and spot light position */
     float pad0;
     float direction[3]; /* directional light: the direction light travels */
     float pad1;
+    float to_local[9];  /* spot, envmap: world directions to the light's own frame (row-major 3x3); an
+                         * envmap's is a rotation (its transpose maps back) */
+    float cos_cutoff;   /* spot: Mitsuba's falloff (lights.h) */
+    float cos_beam;
+    float cutoff;       /* radians */
+    float inv_transition;   /* 1 / (cutoff - beam width), radians */
+    int env_res[2];     /* envmap: image width and height (envmap.h has the layout of its tables) */
+    int env_data;       /* envmap: offset of its tables in env_data */
+    float env_norm;     /* envmap: W (H - 1) / (2 pi^2): patch probability density to solid angle, times sin */
+    int pad2[3];
 } Light;
 
 #define MEDIUM_HOMOGENEOUS 0
@@ -267,7 +279,7 @@ typedef struct {
     int specular_chains_only;
     int camera_medium;      /* -1: vacuum */
     int light_count;
-    int env_light;          /* index of the constant light, or -1 */
+    int env_light;          /* index of the environment light (constant or envmap), or -1 */
     int filter_size;        /* entries of the filter's inverse-CDF table */
     float filter_radius;    /* pixels */
     uint seed;

@@ -6,7 +6,7 @@ so no image is downloaded. Run it again to regenerate: python scenes/make_textur
 - wood.png: wood grain, growth rings bent by noise (sRGB colour);
 - roughness.png: microfacet roughness 0.05 to 0.45 in blotches (raw grey: read with raw=true);
 - plaster_normals.png: a tangent-space normal map of rough plaster (raw RGB, 2 rgb - 1);
-- bumps.exr: a height field of round dimples for a bump map (float).
+- bumps.exr: a height field of round dimples for a bump map (float, 0 to 0.02).
 """
 from pathlib import Path
 
@@ -93,7 +93,8 @@ def bumps(n=64, per_side=4):
     y, x = np.mgrid[0:n, 0:n] / n * per_side
     fy, fx = y - np.floor(y) - 0.5, x - np.floor(x) - 0.5
     r2 = (fx * fx + fy * fy) / 0.16
-    return (np.where(r2 < 1, -(1 - r2) ** 2, 0.0) * 0.02).astype(np.float32)[..., None]
+    # heights in [0, 0.02] (textures hold no negative texels): the rim at 0.02, the dimples' floors at 0
+    return ((1 - np.where(r2 < 1, (1 - r2) ** 2, 0.0)) * 0.02).astype(np.float32)[..., None]
 
 
 def main():

@@ -301,7 +301,7 @@ def test_texture_data_edit_and_bad_texels(device, template_dir, tmp_path):
     assert _same(edited, loaded)
     bad = flatter.copy()
     bad[3, 5, 0] = -1
-    with pytest.raises(VolclError, match=r"texel x=5 y=3 channel=0 is -1.0"):
+    with pytest.raises(VolclError, match=r"negative texel -1.0 at x=5 y=3 channel=0"):
         params["bumpy.nested_texture.data"] = bad
     with pytest.raises(VolclError, match=r"must keep the texture's shape"):
         params["bumpy.nested_texture.data"] = flatter[1:]

@@ -195,13 +195,14 @@ def resolve(device=None) -> Device:
     raise TypeError(f"device: expected a volcl Device, a selector string or None, not {type(device).__name__}")
 
 
+# what to make smaller when one buffer is too large
 def _size(n: int) -> str:
     return f"{n / 2**20:.1f} MiB" if n < 2**30 else f"{n / 2**30:.2f} GiB"
 
 
 # what to cut down when one buffer is too large
 _FEWER = {"texels": "smaller or fewer textures", "tri_uvs": "fewer textured triangles",
-          "grid_data": "smaller volume grids"}
+          "grid_data": "smaller volume grids", "env_data": "a smaller environment map"}
 
 
 def check_fits(info: Device, buffers: dict[str, int], accumulator_bytes: int = 0) -> None:

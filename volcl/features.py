@@ -15,7 +15,10 @@ FLAGS = (
     "SPHERES",              # analytic sphere primitives
     "SHADING_NORMALS",      # interpolated vertex normals on some mesh
     "DIFFUSE", "DIELECTRIC", "CONDUCTOR", "NULL_BSDF",
-    "AREA_LIGHTS", "POINT_LIGHTS", "DIRECTIONAL_LIGHTS", "ENV_LIGHTS",
+    "AREA_LIGHTS", "POINT_LIGHTS", "DIRECTIONAL_LIGHTS",
+    "ENV_LIGHTS",           # an environment at infinity: a constant or an envmap
+    "ENVMAP",               # an image-based environment (Mitsuba's envmap): lookups and importance sampling
+    "SPOT_LIGHTS",          # Mitsuba's spot light
     "MEDIA",                # any participating medium
     "MEDIUM_BOUNDARIES",    # shapes that name an interior or exterior medium
     "CHROMATIC_MEDIA",      # a medium whose extinction differs between colour channels
@@ -73,7 +76,9 @@ def detect(scene: Scene) -> dict[str, bool]:
     f["AREA_LIGHTS"] = any(s.emitter_radiance is not None for s in scene.shapes)
     f["POINT_LIGHTS"] = "point" in light_kinds
     f["DIRECTIONAL_LIGHTS"] = "directional" in light_kinds
-    f["ENV_LIGHTS"] = "constant" in light_kinds
+    f["ENV_LIGHTS"] = bool(light_kinds & {"constant", "envmap"})
+    f["ENVMAP"] = "envmap" in light_kinds
+    f["SPOT_LIGHTS"] = "spot" in light_kinds
     f["MEDIA"] = bool(media)
     f["MEDIUM_BOUNDARIES"] = any(s.interior is not None or s.exterior is not None for s in scene.shapes)
     f["CHROMATIC_MEDIA"] = any(_chromatic(m.sigma_t) for m in media)
@@ -81,7 +86,7 @@ def detect(scene: Scene) -> dict[str, bool]:
     f["EMISSIVE_MEDIA"] = any(m.radiance is not None and np.any(np.asarray(m.radiance) > 0) for m in media)
     f["GRID_MEDIA"] = any(m.kind == "heterogeneous" for m in media)
     # the estimator's default ('auto'): worth compiling where a point light sits inside a medium
-    f["EQUIANGULAR"] = f["POINT_LIGHTS"] and any(m is not None for m in point_light_media(scene))
+    f["EQUIANGULAR"] = any(m is not None for m in point_light_media(scene))
     return f
 
 
@@ -179,9 +184,19 @@ def medium_at(scene: Scene, point) -> object:
     return max(votes.values(), key=lambda mv: mv[1])[0]
 
 
+POINT_LIKE = ("point", "spot")
+
+
+def escapes_unbounded(scene: Scene, point) -> bool:
+    """Whether some probe ray from `point` leaves the scene without meeting a shape that names a
+    medium: the medium around the point then reaches to infinity that way."""
+    o = np.asarray(point, np.float64)
+    return any(_first_transition(scene, o, d) is None for d in _PROBES)
+
+
 def point_light_media(scene: Scene) -> list:
-    """The medium around each point light (None: vacuum), in the order of scene.emitters' point lights."""
-    return [medium_at(scene, e.position) for e in scene.emitters if e.kind == "point"]
+    """The medium around each point or spot light (None: vacuum), in the order of scene.emitters."""
+    return [medium_at(scene, e.position) for e in scene.emitters if e.kind in POINT_LIKE]
 
 
 def all_features() -> dict[str, bool]:

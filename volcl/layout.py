@@ -81,12 +81,15 @@ TEXTURE = np.dtype([
     ("color1", *f3), ("mean1", np.float32),
 ])
 
-LIGHT_TYPES = {"area": 0, "point": 1, "directional": 2, "constant": 3}
+LIGHT_TYPES = {"area": 0, "point": 1, "directional": 2, "constant": 3, "envmap": 4, "spot": 5}
 LIGHT = np.dtype([
     ("type", np.int32), ("tri_start", np.int32), ("tri_count", np.int32), ("sphere", np.int32),
     ("value", *f3), ("area", np.float32),
     ("position", *f3), ("pad0", np.float32),
     ("direction", *f3), ("pad1", np.float32),
+    ("to_local", np.float32, 9),
+    ("cos_cutoff", np.float32), ("cos_beam", np.float32), ("cutoff", np.float32), ("inv_transition", np.float32),
+    ("env_res", np.int32, 2), ("env_data", np.int32), ("env_norm", np.float32), ("pad2", np.int32, 3),
 ])
 
 MEDIUM_TYPES = {"homogeneous": 0, "heterogeneous": 1}

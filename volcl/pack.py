@@ -10,7 +10,7 @@ arrays in parts, so that an edited value (volcl.params) repacks only the part it
 
     geometry   triangles, normals, spheres, cylinders, BVH,            vertex positions, transforms
                texture coordinates and parametrizations
-    lights     light records, area-light triangle CDFs              emitter values, geometry
+    lights     light records, area-light triangle CDFs, envmaps     emitter values, geometry
     shapes     per-shape bsdf, light and media indices              structure only
     bsdfs      bsdf records, textures and texels, bsdf tables       bsdf colours, IORs, roughness,
                                                                     texture data (volcl.pack_materials)
@@ -26,8 +26,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import layout
+from . import envmap, layout
 from .bvh import build_bvh
+from .errors import VolclError
 from .features import detect
 from .grids import GridPacker
 from .mesh import triangle_areas32
@@ -41,7 +42,7 @@ FILTER_TABLE_SIZE = 4097
 # part -> the arrays it packs, in the order parts are packed (shapes name the lights)
 PARTS = {
     "geometry": ("nodes", "prim_ids", "triangles", "normals", "spheres", "cylinders", "tri_uvs", "uv_maps"),
-    "lights": ("lights", "light_tri_cdf", "light_tris"),
+    "lights": ("lights", "light_tri_cdf", "light_tris", "env_data"),
     "shapes": ("shapes",),
     "bsdfs": ("bsdfs", "textures", "texels", "bsdf_tables"),
     "media": ("media", "grids", "grid_data"),
@@ -49,8 +50,8 @@ PARTS = {
 }
 # the kernel's buffer arguments, in order (kernels/render.cl)
 ARG_ORDER = ("nodes", "prim_ids", "triangles", "normals", "spheres", "cylinders", "shapes", "bsdfs", "lights",
-             "light_tri_cdf", "light_tris", "media", "grids", "grid_data", "params", "filter_table", "tri_uvs",
-             "uv_maps", "textures", "texels", "bsdf_tables")
+             "light_tri_cdf", "light_tris", "env_data", "media", "grids", "grid_data", "params", "filter_table",
+             "tri_uvs", "uv_maps", "textures", "texels", "bsdf_tables")
 
 
 @dataclass
@@ -94,6 +95,17 @@ def _pack_media(media, grids: GridPacker):
         if m.radiance is not None:
             r["emission"] = sigma_t * (1.0 - albedo) * m.radiance
     return arr
+
+
+def _pack_spot(rec, e) -> None:
+    """Mitsuba's spot: position, the frame its falloff is measured in, and the falloff's constants
+    (kernels/lights.h spot_falloff)."""
+    rec["position"] = e.position
+    rec["to_local"] = np.linalg.inv(np.asarray(e.to_world, np.float64)[:3, :3]).reshape(9)
+    cutoff, beam = math.radians(e.cutoff_angle), math.radians(e.beam_width)
+    rec["cos_cutoff"], rec["cos_beam"], rec["cutoff"] = math.cos(cutoff), math.cos(beam), cutoff
+    # a beam as wide as the cutoff has no transition (never evaluated there: infinite is harmless)
+    rec["inv_transition"] = 1.0 / (cutoff - beam) if cutoff != beam else np.inf
 
 
 def filter_profile(f: Filter, x: np.ndarray) -> np.ndarray:
@@ -197,6 +209,7 @@ class Packer:
         self.bounds = (np.zeros(3), np.zeros(3))
         self.light_count, self.env_light, self.shape_light = 0, -1, {}
         self.stats = {"cylinders": len(self.cylinder_shapes)}
+        self._envmaps: dict = {}        # id(emitter) -> (image, scale, its tables), see _envmap_tables
 
     def medium_id(self, m) -> int:
         return -1 if m is None else self.medium_index[id(m)]
@@ -359,7 +372,10 @@ class Packer:
                 light_tris.extend((self.first_tri[id(s)] + keep).tolist())
             self.shape_light[id(s)] = len(lights)
             lights.append(rec)
-        env_light = -1
+        env_light, env_data = -1, []     # env_data: the envmap's tables (one at most)
+        environments = [e for e in self.scene.emitters if e.kind in ("constant", "envmap")]
+        if len(environments) > 1 and any(e.kind == "envmap" for e in environments):
+            raise VolclError("only one environment emitter (envmap or constant) can be in a scene, as in Mitsuba")
         for e in self.scene.emitters:
             rec = np.zeros((), layout.LIGHT)
             rec["type"] = layout.LIGHT_TYPES[e.kind]
@@ -367,6 +383,8 @@ class Packer:
             rec["sphere"] = -1
             if e.kind == "point":
                 rec["position"] = e.position
+            elif e.kind == "spot":
+                _pack_spot(rec, e)
             elif e.kind == "directional":
                 rec["direction"] = np.asarray(e.direction) / np.linalg.norm(e.direction)
             elif e.kind == "constant":
@@ -374,13 +392,33 @@ class Packer:
                     lights[env_light]["value"] = lights[env_light]["value"] + np.asarray(e.value, np.float32)
                     continue
                 env_light = len(lights)
+            elif e.kind == "envmap":
+                data, res, norm = self._envmap_tables(e)
+                rec["to_local"] = np.linalg.inv(np.asarray(e.to_world, np.float64)[:3, :3]).reshape(9)
+                rec["env_res"], rec["env_data"], rec["env_norm"] = res, 0, norm   # the one environment
+                env_data.append(data)
+                env_light = len(lights)
             lights.append(rec)
         light_arr = np.zeros(max(len(lights), 1), layout.LIGHT)
         for i, rec in enumerate(lights):
             light_arr[i] = rec
         self.light_count, self.env_light = len(lights), env_light
         self.arrays.update(lights=light_arr, light_tri_cdf=np.asarray(light_cdf or [1.0], np.float32),
-                           light_tris=np.asarray(light_tris or [0], np.int32))
+                           light_tris=np.asarray(light_tris or [0], np.int32),
+                           env_data=env_data[0] if env_data else np.zeros(1, np.float32))
+        self.stats["env_texels"] = sum(int(np.prod(e.image.shape[:2])) for e in environments if e.kind == "envmap")
+
+    def _envmap_tables(self, e):
+        """(tables, (W, H), env_norm) of an envmap (volcl.envmap), kept while its image and scale
+        stay the same: repacking the lights for another light's edit does not rebuild them."""
+        cached = self._envmaps.get(id(e))
+        if cached is not None and cached[0] is e.image and cached[1] == e.scale:
+            return cached[2]
+        texels = envmap.texels_for(e.image, e.scale)
+        data, norm = envmap.tables(texels)
+        result = (data, (texels.shape[1], texels.shape[0]), norm)
+        self._envmaps[id(e)] = (e.image, e.scale, result)
+        return result
 
     def _pack_shapes(self):
         shape_arr = np.zeros(max(len(self.scene.shapes), 1), layout.SHAPE_INFO)

@@ -54,7 +54,7 @@ KINDS = {
     "transform": "a <transform> (a 4x4 matrix)",
     "ior": "a <float> or a <string> material name",
     "grid": "a grid of values (a numpy array of the grid's shape)",
-    "image": "a texture's texels (a numpy array of the texture's shape: height, width, channels)",
+    "image": "an image's texels (a numpy array of the image's shape: height, width, channels)",
     "uv_transform": "a 3x3 affine map of texture coordinates (last row 0 0 1)",
 }
 
@@ -137,17 +137,20 @@ def convert(param: Param, value):
             raise CheckError(f"matrix: the last row must be 0 0 0 1 (affine), got {m[3].tolist()}")
         return checks.invertible(param.name, m)
     if kind == "image":
+        # texture texels and environment maps alike: a shape kept, finite and non-negative texels
         if not isinstance(value, np.ndarray) or value.dtype.kind not in "iuf":
             raise _type_error(param, value)
+        what = "texture" if "bsdfs" in param.parts else "image"
         if value.shape != param.shape:
-            raise CheckError(f"'{param.name}' must keep the texture's shape {param.shape} (height, width, "
+            raise CheckError(f"'{param.name}' must keep the {what}'s shape {param.shape} (height, width, "
                              f"channels), got {value.shape}; load another image file to change it")
         a = np.array(value, dtype=np.float32)
         bad = ~np.isfinite(a) | (a < 0)
         if bad.any():
             y, x, c = (int(i) for i in np.argwhere(bad)[0])
-            raise CheckError(f"'{param.name}': texel x={x} y={y} channel={c} is {float(a[y, x, c])!r}; textures "
-                             f"need finite, non-negative values")
+            v = float(a[y, x, c])
+            raise CheckError(f"'{param.name}' has a {'negative' if v < 0 else 'non-finite'} texel {v!r} at x={x} "
+                             f"y={y} channel={c}; {what}s need finite, non-negative values")
         return a
     if kind == "uv_transform":
         try:
@@ -367,14 +370,19 @@ def _medium_params(scene: ModelScene, m: Medium, prefix: str):
 
 def _emitter_params(scene: ModelScene, e: Emitter, prefix: str):
     owner = _owner(f"<emitter type=\"{e.kind}\">", e, "emitter")
-    name = {"point": "intensity", "directional": "irradiance", "constant": "radiance"}[e.kind]
+    if e.kind == "envmap":
+        yield from _envmap_params(e, prefix, owner)
+        return
+    name = {"point": "intensity", "spot": "intensity", "directional": "irradiance", "constant": "radiance"}[e.kind]
 
     def put_value(a):
         checks.nonneg_color(name, a)
         e.value = a
     yield Param(f"{prefix}.{name}.value", name, "color", lambda: np.array(e.value, np.float64), put_value,
                 ("lights",), owner)
-    if e.kind == "point":
+    if e.kind == "spot":
+        yield from _spot_params(e, prefix, owner)
+    elif e.kind == "point":
         def put_position(p):
             e.position = p
         yield Param(f"{prefix}.position", "position", "point", lambda: np.array(e.position, np.float64),
@@ -384,6 +392,52 @@ def _emitter_params(scene: ModelScene, e: Emitter, prefix: str):
             e.direction = checks.direction(d)
         yield Param(f"{prefix}.direction", "direction", "point", lambda: np.array(e.direction, np.float64),
                     put_direction, ("lights",), owner)
+
+
+def _spot_params(e: Emitter, prefix: str, owner):
+    def put_cutoff(v):
+        e.cutoff_angle = checks.spot_cutoff(v)
+
+    def put_beam(v):
+        e.beam_width = checks.spot_beam(v)
+
+    def put_to_world(m):
+        e.to_world = m
+        e.position = m[:3, 3].copy()
+    yield Param(f"{prefix}.cutoff_angle", "cutoff_angle", "float", lambda: float(e.cutoff_angle), put_cutoff,
+                ("lights",), owner)
+    yield Param(f"{prefix}.beam_width", "beam_width", "float", lambda: float(e.beam_width), put_beam,
+                ("lights",), owner)
+    yield Param(f"{prefix}.to_world", "to_world", "transform", lambda: e.to_world.copy(), put_to_world,
+                ("lights",), owner)
+
+
+def _envmap_params(e: Emitter, prefix: str, owner):
+    """Mitsuba's keys: scale, data (here the image as read, (height, width, channels); Mitsuba's
+    tensor has two more columns, copies of the seam), to_world."""
+    def put_scale(v):
+        if not v >= 0:
+            raise CheckError(f"'scale' must be >= 0, got {v}")
+        if float(np.max(e.image)) * v > checks.FLOAT32_MAX:
+            raise CheckError(f"the brightest texel times 'scale' {v:g} is beyond the single-precision range")
+        e.scale = v
+
+    def put_data(a):
+        bad = a < 0
+        if bad.any():
+            y, x, c = (int(i) for i in np.argwhere(bad)[0])
+            raise CheckError(f"'data' has a negative texel {float(a[y, x, c])!r} at x={x} y={y} channel={c}")
+        if float(np.max(a)) * e.scale > checks.FLOAT32_MAX:
+            raise CheckError("'data' times 'scale' reaches beyond the single-precision range")
+        e.image = a
+
+    def put_to_world(m):
+        e.to_world = checks.envmap_transform(m)
+    yield Param(f"{prefix}.scale", "scale", "float", lambda: float(e.scale), put_scale, ("lights",), owner)
+    yield Param(f"{prefix}.data", "data", "image", lambda: e.image.copy(), put_data, ("lights",), owner,
+                e.image.shape)
+    yield Param(f"{prefix}.to_world", "to_world", "transform", lambda: e.to_world.copy(), put_to_world,
+                ("lights",), owner)
 
 
 def _shape_params(scene: ModelScene, s: Shape, prefix: str):
@@ -538,7 +592,7 @@ class SceneParameters(Mapping):
         return key in self._params
 
     def kind(self, key) -> str:
-        """'float', 'color', 'point', 'transform', 'ior' or 'grid'."""
+        """'float', 'color', 'point', 'transform', 'ior', 'grid' or 'image'."""
         return self._param(key).kind
 
     def _param(self, key) -> Param:

@@ -163,12 +163,18 @@ class Shape:
 
 @dataclass
 class Emitter:
-    kind: str                        # 'point' | 'directional' | 'constant'
-    value: np.ndarray                # intensity (W/sr) | irradiance | radiance
-    position: Optional[np.ndarray] = None
+    kind: str                        # 'point' | 'spot' | 'directional' | 'constant' | 'envmap'
+    value: np.ndarray                # intensity (W/sr: point, spot) | irradiance | radiance; envmap: 1
+    position: Optional[np.ndarray] = None     # point; spot: to_world's origin
     direction: Optional[np.ndarray] = None    # directional: direction the light travels
     source: Optional[Source] = None
     id: str = ""
+    to_world: Optional[np.ndarray] = None     # spot, envmap: the emitter's frame (4x4)
+    cutoff_angle: float = 20.0       # spot: degrees from its axis (+z of to_world) to where it is dark
+    beam_width: float = 15.0         # spot: degrees of full intensity (falls off linearly beyond)
+    image: Optional[np.ndarray] = None        # envmap: linear pixels (h, w, c) as read (volcl.scene.images)
+    scale: float = 1.0               # envmap: radiance multiplier
+    filename: str = ""               # envmap: the image file
 
 
 @dataclass
