@@ -15,6 +15,7 @@ from .bvh import build_bvh
 from .features import detect
 from .grids import GridPacker
 from .mesh import triangle_areas32
+from .phase import PhasePacker
 from .scene.model import Camera, Filter, Scene
 
 FILTER_TABLE_SIZE = 4097
@@ -57,14 +58,13 @@ def _pack_bsdfs(bsdfs):
     return arr
 
 
-def _pack_media(media, grids: GridPacker):
+def _pack_media(media, grids: GridPacker, phases: PhasePacker):
     arr = np.zeros(max(len(media), 1), layout.MEDIUM)
     arr["sigma_t_grid"] = arr["albedo_grid"] = -1
     for i, m in enumerate(media):
         r = arr[i]
         r["type"] = layout.MEDIUM_TYPES[m.kind]
-        r["phase"] = layout.PHASE_TYPES[m.phase.kind]
-        r["g"] = m.phase.g if m.phase.kind == "hg" else 0.0
+        r["phase"], r["g"], r["phase_lobe"], r["phase_lobe_count"] = phases.add(m.phase)
         if m.kind == "heterogeneous":
             # the scale goes into the grid values (and so into the majorants) once, here
             r["sigma_t_grid"] = grids.add(m.sigma_t, m.scale, tracked=True)
@@ -268,8 +268,10 @@ def pack(scene: Scene, features: dict | None = None, max_leaf: int = 4, majorant
     bvh_seconds = time.perf_counter() - t0
 
     grids = GridPacker(majorant_cells)
-    media_arr = _pack_media(media, grids)
+    phases = PhasePacker()
+    media_arr = _pack_media(media, grids, phases)
     grid_desc, grid_data = grids.arrays()
+    phase_lobes, phase_tables = phases.arrays()
 
     cam = scene.camera
     params = np.zeros((), layout.RENDER_PARAMS)
@@ -303,7 +305,9 @@ def pack(scene: Scene, features: dict | None = None, max_leaf: int = 4, majorant
         "media": media_arr, "grids": grid_desc, "grid_data": grid_data,
         "params": params.reshape(1),
         "filter_table": filter_table(cam.rfilter),
+        "phase_lobes": phase_lobes, "phase_tables": phase_tables,
     }
     feats = features if features is not None else detect(scene)
-    stats = {"grid_voxels": grids.voxels, "majorant_cells": grids.majorant_count}
+    stats = {"grid_voxels": grids.voxels, "majorant_cells": grids.majorant_count,
+             "phase_table_ratio_error": max(phases.ratio_errors, default=0.0)}
     return Packed(arrays, params, feats, ntri, len(sphere_shapes), bvh_seconds, stats)

@@ -76,7 +76,8 @@ class Renderer:
     """
 
     ARG_ORDER = ("nodes", "prim_ids", "triangles", "normals", "spheres", "shapes", "bsdfs", "lights",
-                 "light_tri_cdf", "light_tris", "media", "grids", "grid_data", "params", "filter_table")
+                 "light_tri_cdf", "light_tris", "media", "grids", "grid_data", "params", "filter_table",
+                 "phase_lobes", "phase_tables")
 
     def __init__(self, scene: Scene, device: devmod.DeviceInfo | None = None, features: dict | None = None,
                  seed: int | None = None, slots: int | None = None, tile: int | None = None,

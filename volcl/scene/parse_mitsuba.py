@@ -15,6 +15,7 @@ from . import objects, transform as tf
 from .model import (Bsdf, Camera, Emitter, Filter, Integrator, Medium, Phase, Scene, Volume, rgb)
 from .objects import AreaLight, Sampler
 from .parse_common import Dialect, Node, Spec, medium_list
+from .phases import SPECS as PHASE_SPECS, build_phase
 from .properties import PROPERTY_TAGS
 from .shapes import PRIMITIVES, bounds, mesh_shape, sphere_shape
 
@@ -72,7 +73,7 @@ SPECS = {
         "gridvolume": Spec({"filename": "string", "filter_type": "string", **_TO_WORLD}),
         "constvolume": Spec({"value": "color", **_TO_WORLD}),
     },
-    "phase": {"isotropic": Spec(), "hg": Spec({"g": "float"})},
+    "phase": PHASE_SPECS,
 }
 
 # Mitsuba 3's perspective sensor without a fov uses a 50 mm lens on a 36 x 24 mm film, measured
@@ -388,10 +389,6 @@ def build_volume(node: Node) -> Volume:
     return Volume("grid", value=rgb(0.0), data=data, to_world=node.transform("to_world"),
                   filter=node.choice("filter_type", ("trilinear", "nearest"), "trilinear"),
                   filename=path)
-
-
-def build_phase(node: Node) -> Phase:
-    return objects.phase_hg(node, "g", 0.8) if node.type == "hg" else Phase()
 
 
 DIALECT = Dialect(
