@@ -359,6 +359,32 @@ def pdf(phase: Phase, cos) -> np.ndarray:
     return sum(w * _pdf_leaf(leaf, cos) for w, leaf in lobes(phase))
 
 
+def _mean_cosine_leaf(leaf: Phase) -> float:
+    if leaf.kind in ("isotropic", "rayleigh"):
+        return 0.0
+    if leaf.kind == "hg":
+        return leaf.g
+    if leaf.kind == "draine":      # Draine (2003), eq. 6
+        g, a = leaf.g, leaf.alpha
+        return g * (1 + a * (3 + 2 * g * g) / 5) * draine_normalization(g, a)
+    if leaf.kind == "tabulated":
+        c = np.linspace(-1.0, 1.0, 200_001)
+        f = 2 * math.pi * tabulated_pdf(leaf.values, c)
+        return float(np.sum(0.5 * ((f * c)[1:] + (f * c)[:-1]) * np.diff(c)))
+    # Fournier-Forand: over x = s^a, where the density is bounded (cells graded towards x = 0)
+    ff = FournierForand(leaf.n, leaf.mu)
+    edges = np.concatenate([[0.0], np.logspace(-30, 0, 301)])
+    nodes, weights = np.polynomial.legendre.leggauss(16)
+    half = 0.5 * np.diff(edges)
+    x = (0.5 * (edges[1:] + edges[:-1]))[:, None] + half[:, None] * nodes[None]
+    return float(np.sum(half[:, None] * weights[None] * ff.density_x(x) * (1 - 2 * x ** (1 / ff.a))))
+
+
+def mean_cosine(phase: Phase) -> float:
+    """E[cos] of the phase function (its asymmetry), closed forms where they exist."""
+    return sum(w * _mean_cosine_leaf(leaf) for w, leaf in lobes(phase))
+
+
 class PhasePacker:
     """Collects the lobes and tables of every medium's phase function for the kernels."""
 
