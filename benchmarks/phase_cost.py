@@ -151,7 +151,7 @@ def main(argv=None):
     p.add_argument("--baseline-rev", help="commit to compare HG-only scenes against (skipped without)")
     p.add_argument("--scenes", nargs="*", default=[str(ROOT / "scenes" / n) for n in ("fog.xml", "smoke_sphere.xml",
                                                                                     "underwater.xml")])
-    p.add_argument("--phase-scene", default=str(ROOT / "scenes" / "smoke_sphere.xml"))
+    p.add_argument("--phase-scene", default=str(ROOT / "scenes" / "fog.xml"))
     p.add_argument("--spp", type=int, default=16)
     p.add_argument("--width", type=int, default=160)
     p.add_argument("--height", type=int, default=120)

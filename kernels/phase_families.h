@@ -122,15 +122,21 @@ inline float3 phase_draine_sample(__global const PhaseLobe *l, float3 d_in, floa
     return phase_direction_at(g >= 0.0f ? d_in : -d_in, w, u.y);
 }
 
-/* Fournier-Forand's value at s = sin^2(theta / 2) (volcl/phase.py FournierForand.pdf). */
-inline float phase_ff_eval(__global const PhaseLobe *l, float s) {
+/* Fournier-Forand's value at s = sin^2(theta / 2) (volcl/phase.py FournierForand.pdf), and in
+ * *pdf the density phase_ff_sample_s gives it. With delta = q s, L = ln delta and P = delta^a, the
+ * exponentials of the closed form are all P, delta and expm1's of aL and (a - 1)L: one log, one
+ * exp, and an expm1 only where the plain difference would cancel. */
+inline float phase_ff_eval_pdf(const SceneData *sc, __global const PhaseLobe *l, float s, float *pdf) {
     float a = l->p[0], q = l->p[1];
     s = fmax(s, PHASE_FF_S_MIN);
-    float L = log(q * s);
-    float ratio;
+    float delta = q * s;
+    float L = log(delta);
+    float P = exp(a * L);
+    float ratio;            /* D(L) / expm1(L)^2 */
     if (fabs(L) < 0.5f) {
-        /* D / expm1(L)^2 = a (1 - a) S / (expm1(L) / L)^2, S = sum_{m >= 2} (a^(m-1) - (a-1)^(m-1)) L^(m-2) / m!
-         * (to m = 9: the rest is below 1e-7 of S for |L| < 1/2) */
+        /* a (1 - a) S / (expm1(L) / L)^2, S = sum_{m >= 2} (a^(m-1) - (a-1)^(m-1)) L^(m-2) / m!
+         * (to m = 9: the rest is below 1e-7 of S for |L| < 1/2); delta - 1 is expm1(L) of the
+         * rounded delta whose log L is, exactly */
         float pa = a, pb = a - 1.0f, fact = 2.0f, pl = 1.0f, S = 0.5f;
         for (int m = 3; m <= 9; ++m) {
             pa *= a;
@@ -139,24 +145,26 @@ inline float phase_ff_eval(__global const PhaseLobe *l, float s) {
             pl *= L;
             S += (pa - pb) * pl / fact;
         }
-        float e = L != 0.0f ? expm1(L) / L : 1.0f;
+        float e = L != 0.0f ? (delta - 1.0f) / L : 1.0f;
         ratio = a * (1.0f - a) * S / (e * e);
     } else {
-        float e = expm1(L);
-        ratio = ((1.0f - a) * expm1(a * L) + a * expm1((a - 1.0f) * L)) / (e * e);
+        /* D = (1 - a) expm1(aL) + a expm1((a - 1)L): the two terms have opposite signs and D is
+         * their difference (within a factor 4 of either, for |L| >= 1/2), so each needs its digits */
+        float ea = fabs(a * L) < 0.5f ? expm1(a * L) : P - 1.0f;
+        float eb = fabs((a - 1.0f) * L) < 0.5f ? expm1((a - 1.0f) * L) : P / delta - 1.0f;
+        float e = delta - 1.0f;
+        ratio = ((1.0f - a) * ea + a * eb) / (e * e);
     }
     float c = 1.0f - 2.0f * s;
-    return ((q - 1.0f) * ratio + a * exp((a - 1.0f) * L)) * VOLCL_INV_4PI + l->p[2] * (3.0f * c * c - 1.0f);
-}
-
-/* The pdf of phase_ff_sample_s at s. */
-inline float phase_ff_pdf(const SceneData *sc, __global const PhaseLobe *l, float s) {
-    float a = l->p[0];
-    float ls = log(fmax(s, PHASE_FF_S_MIN));
-    float scale;
-    float y = phase_table_density(sc->phase_tables + l->table, l->table_size, exp(a * ls), &scale);
-    /* the density of x = s^a times dx / dOmega = a s^(a - 1) / (4 pi) */
-    return y * scale * a * exp((a - 1.0f) * ls) * VOLCL_INV_4PI;
+    float value = ((q - 1.0f) * ratio + a * (P / delta)) * VOLCL_INV_4PI + l->p[2] * (3.0f * c * c - 1.0f);
+    /* the table holds the density of x = s^a = P q^-a; dx / dOmega = a s^(a - 1) / (4 pi) = a (x / s) / (4 pi) */
+    float x = P * l->p[3], scale;
+    float y = phase_table_density(sc->phase_tables + l->table, l->table_size, x, &scale);
+    *pdf = y * scale * a * (x / s) * VOLCL_INV_4PI;
+    /* below the floor the lobe is its table's first bin, which holds the value's own probability
+     * there (volcl/phase.py): value = pdf keeps its weight exactly 1 (float32 values at the floor
+     * differ from the table's by ~1e-5, and near mu = 3 most samples land there) */
+    return s > PHASE_FF_S_MIN ? value : *pdf;
 }
 
 inline float phase_ff_sample_s(const SceneData *sc, __global const PhaseLobe *l, float u) {
@@ -182,14 +190,8 @@ inline float phase_lobe_eval(const SceneData *sc, __global const PhaseLobe *l, c
         v = phase_table_density(sc->phase_tables + l->table, l->table_size, pg->cos, &scale) * (0.5f * VOLCL_INV_PI);
         break;
     }
-    case LOBE_FOURNIER_FORAND: {
-        float s = 0.5f * pg->w_fwd;
-        *pdf = phase_ff_pdf(sc, l, s);
-        /* below the floor the lobe is its table's first bin, which holds the value's own probability
-         * there (volcl/phase.py): value = pdf keeps its weight exactly 1 (float32 values at the floor
-         * differ from the table's by ~1e-5, and near mu = 3 most samples land there) */
-        return s > PHASE_FF_S_MIN ? phase_ff_eval(l, s) : *pdf;
-    }
+    case LOBE_FOURNIER_FORAND:
+        return phase_ff_eval_pdf(sc, l, 0.5f * pg->w_fwd, pdf);
     default:
         v = VOLCL_INV_4PI;
     }

@@ -117,7 +117,7 @@ typedef struct {
 #define LOBE_RAYLEIGH 2
 #define LOBE_DRAINE 3           /* p = (g, alpha, 1 / (1 + alpha (1 + 2 g^2) / 3)) */
 #define LOBE_TABULATED 4        /* table over cos */
-#define LOBE_FOURNIER_FORAND 5  /* p = (a, q, c3 / 16 pi) (volcl/phase.py), table over x = sin^2(theta/2)^a */
+#define LOBE_FOURNIER_FORAND 5  /* p = (a, q, c3 / 16 pi, q^-a) (volcl/phase.py), table over x = sin^2(theta/2)^a */
 
 /* One lobe of a mixture phase function. A table is a piecewise-linear density on table_size knots
  * at phase_tables[table]: the knots, then the density at each knot, then the CDF at each knot. */

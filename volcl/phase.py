@@ -418,7 +418,7 @@ class PhasePacker:
             t = fournier_forand_table(ff, leaf.tolerance)
             self.ratio_errors.append(t["ratio_error"])
             r["table"], r["table_size"] = self._table(t)
-            r["p"][:3] = ff.a, ff.q, ff.c3 / (16.0 * math.pi)
+            r["p"] = ff.a, ff.q, ff.c3 / (16.0 * math.pi), ff.q ** -ff.a
         return r
 
     def add(self, phase: Phase) -> tuple[int, float, int, int]:

@@ -149,14 +149,16 @@ __kernel void hg_sample_cos(__global float *c, uint seed, float g) {
     c[i] = g >= 0.0f ? 1.0f - w : w - 1.0f;
 }
 
-/* The Fournier-Forand lobe's value and table pdf at s[i] = sin^2(theta / 2). */
+/* The Fournier-Forand lobe's value and table pdf at s[i] = sin^2(theta / 2) (at the floor, where
+ * the lobe counts value = pdf, both are the pdf). */
 __kernel void phase_ff_at_s(__global const PhaseLobe *lobes, __global const float *tables,
                             __global const float *s, __global float *value, __global float *pdf) {
     int i = get_global_id(0);
     SceneData sc;
     sc.phase_tables = tables;
-    value[i] = phase_ff_eval(&lobes[0], s[i]);
-    pdf[i] = phase_ff_pdf(&sc, &lobes[0], s[i]);
+    float p;
+    value[i] = phase_ff_eval_pdf(&sc, &lobes[0], s[i], &p);
+    pdf[i] = p;
 }
 
 /* Rayleigh cosines from u[i]. */
