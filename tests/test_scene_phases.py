@@ -10,6 +10,7 @@ from volcl.errors import VolclError
 from volcl.features import detect
 from volcl.pack import pack
 from volcl.scene import load
+from volcl.scene.model import Phase
 
 SCENE = '''<scene version="3.0.0">
 <medium type="homogeneous" id="m">
@@ -213,3 +214,12 @@ def test_phase_trees_load_and_pack_or_raise_volclerror(tmp_path_factory, body):
     if m["phase"] == 2:
         w = lobes["weight"][m["phase_lobe"]:m["phase_lobe"] + m["phase_lobe_count"]]
         assert (w > 0).all() and abs(w.sum() - 1) < 1e-6
+
+
+@pytest.mark.parametrize("phase", [Phase("draine", 0.2, alpha=-1.0), Phase("mie", diameter=0.0),
+                                   Phase("fournier_forand", n=1.1, mu=2.5), Phase("tabulated", values=np.array([1.0])),
+                                   Phase("blend", weight=0.5, phases=(Phase("hg", 1.5), Phase()))],
+                         ids=["draine alpha", "mie diameter", "ff mu", "tabulated one value", "blend of a bad hg"])
+def test_phases_built_in_python_are_checked_when_packed(phase):
+    with pytest.raises(ValueError, match="outside|at least 2"):
+        ph.PhasePacker().add(phase)

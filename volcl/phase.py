@@ -385,6 +385,35 @@ def mean_cosine(phase: Phase) -> float:
     return sum(w * _mean_cosine_leaf(leaf) for w, leaf in lobes(phase))
 
 
+def check(phase: Phase) -> None:
+    """ValueError naming the valid range for a phase function outside its domain (the scene parser
+    reports the same with the file and line; this guards phase functions built in Python)."""
+    def bad(what):
+        raise ValueError(f"{phase.kind} phase function: {what}")
+    if phase.kind == "blend":
+        if not 0.0 <= phase.weight <= 1.0 or len(phase.phases) != 2:
+            bad(f"weight {phase.weight} outside [0, 1], or {len(phase.phases)} nested phases instead of 2")
+        for p in phase.phases:
+            check(p)
+    elif phase.kind in ("hg", "draine", "cornette_shanks") and not -1.0 < phase.g < 1.0:
+        bad(f"g = {phase.g} outside -1 < g < 1")
+    elif phase.kind == "draine" and not 0.0 <= phase.alpha <= DRAINE_ALPHA_MAX:
+        bad(f"alpha = {phase.alpha} outside 0 <= alpha <= {DRAINE_ALPHA_MAX:g}")
+    elif phase.kind == "tabulated":
+        v = np.asarray(phase.values, np.float64)
+        if v.ndim != 1 or len(v) < 2 or not np.all(np.isfinite(v)) or np.any(v < 0) or not np.any(v > 0):
+            bad("values must be at least 2 finite numbers >= 0, not all 0")
+    elif phase.kind == "fournier_forand" and not (FF_N_RANGE[0] < phase.n <= FF_N_RANGE[1]
+                                                  and FF_MU_RANGE[0] <= phase.mu <= FF_MU_RANGE[1]):
+        bad(f"n = {phase.n}, mu = {phase.mu} outside {FF_N_RANGE[0]:g} < n <= {FF_N_RANGE[1]:g}, "
+            f"{FF_MU_RANGE[0]:g} <= mu <= {FF_MU_RANGE[1]:g}")
+    elif phase.kind == "mie" and not MIE_DIAMETER_RANGE[0] < phase.diameter <= MIE_DIAMETER_RANGE[1]:
+        bad(f"diameter {phase.diameter} outside {MIE_DIAMETER_RANGE[0]:g} < d <= {MIE_DIAMETER_RANGE[1]:g} micrometres")
+    elif phase.kind not in ("isotropic", "hg", "rayleigh", "draine", "cornette_shanks", "tabulated",
+                            "fournier_forand", "mie", "blend"):
+        bad("unknown kind")
+
+
 class PhasePacker:
     """Collects the lobes and tables of every medium's phase function for the kernels."""
 
@@ -423,6 +452,7 @@ class PhasePacker:
 
     def add(self, phase: Phase) -> tuple[int, float, int, int]:
         """(Medium.phase, Medium.g, Medium.phase_lobe, Medium.phase_lobe_count) for `phase`."""
+        check(phase)
         kind = device_kind(phase)
         if kind != "lobes":
             return layout.PHASE_TYPES[kind], (lobes(phase)[0][1].g if kind == "hg" else 0.0), 0, 0
