@@ -15,7 +15,7 @@ three Markdown tables:
     phase function costs): what each costs where it is used.
 
     python benchmarks/phase_cost.py [--baseline-rev REV] [--scenes SCENE.xml ...] [--spp 16]
-        [--width 160] [--height 120] [--repeat 5] [--phase-scene SCENE.xml]
+        [--width 160] [--height 120] [--repeat 5] [--phase-scene SCENE.xml] [--tables 123]
 """
 from __future__ import annotations
 
@@ -109,10 +109,6 @@ def in_process(args):
     sys.path.insert(0, str(ROOT))
     import time
 
-    from volcl.features import detect
-    from volcl.render import Renderer
-    from volcl.scene import load
-
     def rate_of(renderer):
         def run():
             t = time.process_time()
@@ -121,6 +117,16 @@ def in_process(args):
         renderer.render(args.spp)       # build and warm up
         return run
 
+    if "2" in args.tables:
+        families_unused(args, rate_of)
+    if "3" in args.tables:
+        each_phase(args, rate_of)
+
+
+def families_unused(args, rate_of):
+    from volcl.features import detect
+    from volcl.render import Renderer
+    from volcl.scene import load
     print("\n### 2. HG-only scenes: PHASE_FAMILIES compiled in but unused\n")
     print("| scene | specialized M samples/CPU s | + PHASE_FAMILIES M samples/CPU s | ratio |")
     print("|---|---:|---:|---:|")
@@ -134,11 +140,15 @@ def in_process(args):
         print(f"| {Path(scene).name} | {rates['off'] / 1e6:.3f} | {rates['on'] / 1e6:.3f} | "
               f"{rates['on'] / rates['off']:.3f} |", flush=True)
 
+
+def each_phase(args, rate_of):
+    from volcl import phase as ph
+    from volcl.render import Renderer
+    from volcl.scene import load
+    from volcl.scene.model import Phase
     print(f"\n### 3. {Path(args.phase_scene).name} with each phase function, against HG of its mean cosine\n")
     print("| phase function | mean cosine | M samples/CPU s | HG, same mean cosine | ratio |")
     print("|---|---:|---:|---:|---:|")
-    from volcl import phase as ph
-    from volcl.scene.model import Phase
     renderers, means = {}, {}
     for name, spec in PHASES.items():
         phase = phase_of(spec)
@@ -151,8 +161,6 @@ def in_process(args):
             renderers[key] = rate_of(Renderer(sc))
     rates = best_rates(renderers, args.repeat)
     for name in PHASES:
-        if name.startswith("HG"):
-            continue
         a, b = rates[name], rates[name + " (HG)"]
         print(f"| {name} | {means[name]:.3f} | {a / 1e6:.3f} | {b / 1e6:.3f} | {a / b:.3f} |")
 
@@ -167,9 +175,10 @@ def main(argv=None):
     p.add_argument("--width", type=int, default=160)
     p.add_argument("--height", type=int, default=120)
     p.add_argument("--repeat", type=int, default=5)
+    p.add_argument("--tables", default="123", help="which of the tables to measure (default 123)")
     args = p.parse_args(argv)
     print(f"{cpu_model()}; {args.width}x{args.height}, {args.spp} spp, best of {args.repeat}, variants interleaved")
-    if args.baseline_rev:
+    if args.baseline_rev and "1" in args.tables:
         against_baseline(args)
     in_process(args)
 

@@ -98,7 +98,7 @@ inline float phase_table_density(const __global float *tab, int size, float t, f
 inline float phase_rayleigh_eval(float c) { return (3.0f / (16.0f * VOLCL_PI)) * (1.0f + c * c); }
 
 /* The cube root of v in [1, 2 + sqrt(5)]: a quadratic start within 1.4% and two Newton steps, to
- * 2 ulp (cbrt itself cost 40 ns a call on PoCL, eight times this). */
+ * 2 ulp (PoCL's cbrt is several times slower). */
 inline float phase_rayleigh_cbrt(float v) {
     float A = (-0.02568702f * v + 0.31866124f) * v + 0.72097468f;
     A = (2.0f * A + v / (A * A)) * (1.0f / 3.0f);
