@@ -35,7 +35,10 @@ ROOT = Path(__file__).resolve().parent.parent
 WORKER = """
 import json, sys, time
 sys.path.insert(0, {root!r})
-from volcl.render import Renderer
+try:
+    from volcl.renderer import Renderer
+except ImportError:                                 # checkouts from before volcl/renderer.py
+    from volcl.renderer import Renderer
 from volcl.scene import load
 sc = load({scene!r})
 sc.camera.width, sc.camera.height = {width}, {height}
@@ -125,7 +128,7 @@ def in_process(args):
 
 def families_unused(args, rate_of):
     from volcl.features import detect
-    from volcl.render import Renderer
+    from volcl.renderer import Renderer
     from volcl.scene import load
     print("\n### 2. HG-only scenes: PHASE_FAMILIES compiled in but unused\n")
     print("| scene | specialized M samples/CPU s | + PHASE_FAMILIES M samples/CPU s | ratio |")
@@ -143,7 +146,7 @@ def families_unused(args, rate_of):
 
 def each_phase(args, rate_of):
     from volcl import phase as ph
-    from volcl.render import Renderer
+    from volcl.renderer import Renderer
     from volcl.scene import load
     from volcl.scene.model import Phase
     print(f"\n### 3. {Path(args.phase_scene).name} with each phase function, against HG of its mean cosine\n")

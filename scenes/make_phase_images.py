@@ -22,7 +22,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 from volcl import phase as ph  # noqa: E402
 from volcl.image import srgb_encode  # noqa: E402
-from volcl.render import render  # noqa: E402
+from volcl.renderer import render  # noqa: E402
 from volcl.scene import load  # noqa: E402
 from volcl.scene.model import Phase  # noqa: E402
 

@@ -13,7 +13,7 @@ from test_equiangular import _fog_scene, _light_pixel_mask, _single_scattering
 from volcl import phase as ph
 from volcl.estimator import Estimator
 from volcl.features import detect
-from volcl.render import render
+from volcl.renderer import render
 from volcl.scene.model import Bsdf, Phase, Shape, rgb
 
 PETZOLD = ph.fournier_forand_from_backscatter(0.0183)      # n = 1.10, mu = 3.5835
