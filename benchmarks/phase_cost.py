@@ -38,7 +38,7 @@ sys.path.insert(0, {root!r})
 try:
     from volcl.renderer import Renderer
 except ImportError:                                 # checkouts from before volcl/renderer.py
-    from volcl.renderer import Renderer
+    from volcl.render import Renderer
 from volcl.scene import load
 sc = load({scene!r})
 sc.camera.width, sc.camera.height = {width}, {height}
