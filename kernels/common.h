@@ -19,7 +19,7 @@
     || !defined(VOLCL_HAS_DIRECT) || !defined(VOLCL_HAS_ROUGHCONDUCTOR) || !defined(VOLCL_HAS_ROUGHDIELECTRIC) \
     || !defined(VOLCL_HAS_PLASTIC) || !defined(VOLCL_HAS_ROUGHPLASTIC) || !defined(VOLCL_HAS_THINDIELECTRIC) \
     || !defined(VOLCL_HAS_MASK) || !defined(VOLCL_HAS_TEXTURES) || !defined(VOLCL_HAS_BUMP_MAPS) \
-    || !defined(VOLCL_HAS_ENVMAP) || !defined(VOLCL_HAS_SPOT_LIGHTS)
+    || !defined(VOLCL_HAS_ENVMAP) || !defined(VOLCL_HAS_SPOT_LIGHTS) || !defined(VOLCL_HAS_PHASE_FAMILIES)
 #error "volcl: every VOLCL_HAS_* feature flag must be defined to 0 or 1 by the host"
 #endif
 

@@ -24,6 +24,8 @@ typedef struct {
     __global const Texture *textures;
     __global const float *texels;           /* every bitmap's texels, concatenated */
     __global const float *bsdf_tables;      /* roughplastic transmittance tables */
+    __global const PhaseLobe *phase_lobes;  /* lobes of the mixture phase functions (PHASE_LOBES) */
+    __global const float *phase_tables;     /* their piecewise-linear tables, concatenated */
 } SceneData;
 
 #endif
