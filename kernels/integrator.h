@@ -237,7 +237,7 @@ inline float3 equiangular_direct(const SceneData *sc, Rng *rng, const Equiangula
     float3 sigma_t = vload_f3(m->sigma_t);
     float3 sigma_s = sigma_t * vload_f3(m->albedo);
     float ph = phase_eval(sc, m, es->d, wi);
-    return transmittance_exp(sigma_t, t) * sigma_s * tr_shadow * light_point_intensity(l, -wi)
+    return transmittance_exp(sigma_t, t) * sigma_s * tr_shadow * light_point_emission(sc, l, -wi)
            * (ph * w * (float)count / (pdf_e * d2));
 }
 #endif

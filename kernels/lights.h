@@ -8,6 +8,7 @@
 #define VOLCL_LIGHTS_H
 
 #include "envmap.h"
+#include "textures.h"
 
 typedef struct {
     float3 wi;      /* unit direction from the receiving point towards the light */
@@ -64,6 +65,30 @@ inline float3 light_point_intensity(__global const Light *l, float3 w) {
     if (l->type == LIGHT_SPOT) return intensity * spot_falloff(l, mat3_apply(l->to_local, w));
 #endif
     return intensity;
+}
+
+/* Mitsuba's spot texture coordinates of light-frame direction `wl` (not necessarily unit): the
+ * cone's cross-section at z = 1 mapped onto the unit square, so that the cutoff circle touches
+ * its edges. */
+inline float2 spot_texture_uv(__global const Light *l, float3 wl) {
+    float f = 0.5f / (wl.z * l->tan_cutoff);
+    return (float2)(0.5f + wl.x * f, 0.5f + wl.y * f);
+}
+
+/* What a point or spot light sends towards unit world direction `w`: its intensity, a spot's falloff
+ * and projection texture included. */
+inline float3 light_point_emission(const SceneData *sc, __global const Light *l, float3 w) {
+#if VOLCL_HAS_SPOT_LIGHTS && VOLCL_HAS_TEXTURES
+    if (l->type == LIGHT_SPOT && l->texture >= 0) {
+        float3 wl = mat3_apply(l->to_local, w);
+        float falloff = spot_falloff(l, wl);
+        /* beyond the cutoff the light is dark and the texture never looked up, as in Mitsuba */
+        if (falloff <= 0.0f) return (float3)(0.0f);
+        return vload_f3(l->value) * falloff
+               * texture_eval3(sc, l->texture, (float3)(1.0f), spot_texture_uv(l, wl));
+    }
+#endif
+    return light_point_intensity(l, w);
 }
 
 /* Emitted radiance towards `w` (pointing away from the light) from a point with shading normal ns. */
@@ -141,7 +166,7 @@ inline bool light_sample(const SceneData *sc, float3 ref, float u_pick, float2 u
         if (!(d2 > 0.0f)) return false;
         ls->dist = sqrt(d2);
         ls->wi = v / ls->dist;
-        ls->value = light_point_intensity(l, -ls->wi) / d2;
+        ls->value = light_point_emission(sc, l, -ls->wi) / d2;
         ls->pdf = choice;
         ls->delta = true;
         return true;

@@ -203,7 +203,9 @@ typedef struct {
     int env_res[2];     /* envmap: image width and height (envmap.h has the layout of its tables) */
     int env_data;       /* envmap: offset of its tables in env_data */
     float env_norm;     /* envmap: W (H - 1) / (2 pi^2): patch probability density to solid angle, times sin */
-    int pad2[3];
+    int texture;        /* spot: its projection texture's index in textures, or -1 */
+    float tan_cutoff;   /* spot: tan of the cutoff angle (its texture coordinates) */
+    int pad2;
 } Light;
 
 #define MEDIUM_HOMOGENEOUS 0

@@ -277,6 +277,14 @@ def _cases():
         '<shape type="cube"><transform name="to_world"><scale x="2" y="1.1" z="1.5"/><translate y="0.2"/>'
         '</transform><bsdf type="null"/><medium type="homogeneous" name="interior">'
         '<rgb name="sigma_t" value="0.3"/><float name="albedo" value="0.9"/></medium></shape>'))
+    # Mitsuba's projection texture: a checkerboard in the spot's cone (the uvs of its square)
+    slide = ('<texture type="checkerboard" name="texture"><rgb name="color0" value="1, 0.7, 0.3"/>'
+             '<rgb name="color1" value="0.1, 0.3, 0.9"/><transform name="to_uv"><scale value="4"/></transform>'
+             '</texture></emitter>')
+    s["spot_textured"] = scene_xml(PATH.format(depth=3) + sensor(origin="0, 1.5, 4") + FLOOR
+                                   + spot.format(i="30", c=35, b=25, o="0.3, 1.5, 0.5", t="-0.1, -1, 0")
+                                   .replace("</emitter>", slide))
+    s["spot_textured_in_fog"] = s["spot_in_fog"].replace("</emitter>", slide, 1)
     spp = {"blackbody": 256}
     return {name: (text, spp.get(name, 512), 256, "llvm_ad_spectral" if name == "blackbody" else VARIANT)
             for name, text in s.items()}

@@ -17,7 +17,7 @@ from test_render_surfaces import _plane_points, _plane_view, _silhouette_coverag
 from volcl.estimator import Estimator
 from volcl.renderer import render
 from volcl.scene import transform as tf
-from volcl.scene.model import Bsdf, Emitter, Shape, rgb
+from volcl.scene.model import Bsdf, Emitter, Shape, Texture, rgb
 
 OFF_AXIS = tf.rotate([1.0, 2.0, 3.0], 50.0)
 
@@ -184,3 +184,36 @@ def test_spot_in_fog_with_and_without_equiangular_sampling(device):
         images[name] = render(sc, spp=512, device=device, estimator=est)
     for name in ("two-sample", "one-sample", "equiangular alone"):
         assert_images_match(images[name], images["distance"], blocks=4, what=f"spot in fog: {name} vs distance")
+
+
+def test_textured_spot_on_a_plane(device):
+    """A spot projecting a checkerboard (Mitsuba's `texture`): the light's frame direction w maps to
+    uv = 1/2 + w.xy / (2 w.z tan(cutoff)), and the plane receives I falloff tex(uv) cos / d^2."""
+    cam = _plane_view(12, 12)
+    verts, faces = quad_mesh((0, 0, 0), (5, 0, 0), (0, 5, 0))
+    R, I = 0.7, np.array([3.0, 2.0, 1.0])
+    cutoff, beam = 30.0, 20.0
+    c0, c1 = np.array([1.0, 0.8, 0.6]), np.array([0.1, 0.2, 0.3])
+    origin = np.array([0.2, -0.1, 1.3])
+    to_world = tf.lookat(origin, [0.0, 0.05, 0.0], [0.0, 1.0, 0.0])
+    checker = Texture("checkerboard", color0=rgb(c0), color1=rgb(c1), to_uv=np.diag([3.0, 3.0, 1.0]))
+    spot = Emitter("spot", rgb(I), position=origin, to_world=to_world, cutoff_angle=cutoff, beam_width=beam,
+                   texture=checker)
+    plane = Shape("mesh", diffuse(R), vertices=verts, faces=faces)
+    r = render(scene([plane], [spot], cam=cam, max_depth=2), spp=256, device=device)
+    p = _plane_points(cam, sub=48)
+    v = origin - p
+    d2 = (v ** 2).sum(-1)
+    local = (-v) @ np.linalg.inv(to_world[:3, :3]).T
+    angle = np.degrees(np.arccos(np.clip(local[..., 2] / np.linalg.norm(local, axis=-1), -1, 1)))
+    falloff = np.where(angle < cutoff, np.clip((cutoff - angle) / (cutoff - beam), 0, 1), 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv = 0.5 + local[..., :2] / (2 * local[..., 2:3] * math.tan(math.radians(cutoff)))
+    f = np.mod(np.nan_to_num(uv) * 3.0, 1.0)      # outside the cone the falloff is 0
+    first = (f[..., 0] > 0.5) == (f[..., 1] > 0.5)
+    tex = np.where(first[..., None], c0, c1)
+    irradiance = (falloff * (v[..., 2] / np.sqrt(d2)) / d2)[..., None] * tex
+    expected = irradiance.mean(axis=(1, 3)) * I * R / math.pi
+    lit = expected[..., 0] > 0
+    assert 10 < lit.sum() < 144 - 10
+    assert_mean_matches(r, expected, what="textured spot light on a plane")

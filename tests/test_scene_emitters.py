@@ -185,7 +185,8 @@ def test_spot_in_fog_compiles_equiangular_sampling(tmp_path):
     ('<float name="cutoff_angle" value="0"/>', "'cutoff_angle' must lie in (0, 180]"),
     ('<float name="cutoff_angle" value="200"/>', "'cutoff_angle' must lie in (0, 180]"),
     ('<float name="beam_width" value="-3"/>', "'beam_width' must lie in [0, 180]"),
-    ('<texture type="bitmap" name="texture"/>', "<texture> is not allowed inside"),
+    ('<texture type="checkerboard" name="pattern"/>', "a texture named 'pattern' is not a parameter"),
+    ('<rgb name="texture" value="0.5"/>', "texture"),
 ])
 def test_bad_spot_parameters(tmp_path, extra, words):
     message = _error(tmp_path, f'<emitter type="spot">{extra}</emitter>')
@@ -337,3 +338,21 @@ def test_environment_through_an_unbounded_camera_medium_warns(tmp_path):
                '<float name="radius" value="10"/><bsdf type="null"/><ref name="interior" id="fog"/></shape></scene>')
     path.write_text(bounded)
     assert not any("not enclosed" in w for w in load(path).warnings)
+
+
+def test_spot_projection_texture(tmp_path):
+    """Mitsuba's spot `texture`: read like any colour texture, packed with the scene's textures
+    (after the bsdfs'), and it switches on the texture code."""
+    write_image(tmp_path / "slide.png", np.full((4, 6, 3), 0.5, np.float32), fmt=oiio.UINT8)
+    sc = scene_file(tmp_path, '<emitter type="spot"><texture type="bitmap" name="texture">'
+                              '<string name="filename" value="slide.png"/></texture></emitter>'
+                              '<shape type="sphere"><bsdf type="diffuse"><texture type="checkerboard" '
+                              'name="reflectance"/></bsdf></shape>')
+    spot = [e for e in sc.emitters if e.kind == "spot"][0]
+    assert spot.texture is not None and spot.texture.data.shape == (4, 6, 3)
+    assert detect(sc)["TEXTURES"]
+    from volcl.pack import pack
+    packed = pack(sc)
+    light = [r for r in packed.arrays["lights"] if r["type"] == 5][0]
+    assert light["texture"] == 1 and packed.arrays["textures"][1]["width"] == 6
+    assert np.isclose(light["tan_cutoff"], np.tan(np.radians(20.0)))

@@ -74,7 +74,8 @@ def detect(scene: Scene) -> dict[str, bool]:
     f["NULL_BSDF"] = "null" in bsdf_kinds
     for kind in ("roughconductor", "roughdielectric", "plastic", "roughplastic", "thindielectric", "mask"):
         f[kind.upper()] = kind in bsdf_kinds
-    f["TEXTURES"] = any(textures_of(b) for b in bsdfs)    # normal maps read theirs as colours
+    # normal maps read theirs as colours; a spot may project one
+    f["TEXTURES"] = any(textures_of(b) for b in bsdfs) or any(e.texture is not None for e in scene.emitters)
     f["BUMP_MAPS"] = bool(bsdf_kinds & {"bumpmap", "normalmap"})
     f["AREA_LIGHTS"] = any(s.emitter_radiance is not None for s in scene.shapes)
     f["POINT_LIGHTS"] = "point" in light_kinds

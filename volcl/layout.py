@@ -89,7 +89,7 @@ LIGHT = np.dtype([
     ("direction", *f3), ("pad1", np.float32),
     ("to_local", np.float32, 9),
     ("cos_cutoff", np.float32), ("cos_beam", np.float32), ("cutoff", np.float32), ("inv_transition", np.float32),
-    ("env_res", np.int32, 2), ("env_data", np.int32), ("env_norm", np.float32), ("pad2", np.int32, 3),
+    ("env_res", np.int32, 2), ("env_data", np.int32), ("env_norm", np.float32), ("texture", np.int32), ("tan_cutoff", np.float32), ("pad2", np.int32),
 ])
 
 MEDIUM_TYPES = {"homogeneous": 0, "heterogeneous": 1}

@@ -105,6 +105,7 @@ def _pack_spot(rec, e) -> None:
     rec["to_local"] = np.linalg.inv(np.asarray(e.to_world, np.float64)[:3, :3]).reshape(9)
     cutoff, beam = math.radians(e.cutoff_angle), math.radians(e.beam_width)
     rec["cos_cutoff"], rec["cos_beam"], rec["cutoff"] = math.cos(cutoff), math.cos(beam), cutoff
+    rec["tan_cutoff"] = math.tan(cutoff)
     # a beam as wide as the cutoff has no transition (never evaluated there: infinite is harmless)
     rec["inv_transition"] = 1.0 / (cutoff - beam) if cutoff != beam else np.inf
 
@@ -183,7 +184,9 @@ class Packer:
         self.max_leaf = max_leaf
         self.majorant_cells = majorant_cells
         self.shape_index = {id(s): i for i, s in enumerate(scene.shapes)}
-        self.materials = MaterialPacker([s.bsdf for s in scene.shapes])
+        # spots' projection textures share the texture buffers, after the bsdfs' textures
+        self.materials = MaterialPacker([s.bsdf for s in scene.shapes],
+                                        [e.texture for e in scene.emitters if e.texture is not None])
         self.bsdf_index = self.materials.index
         # texture coordinates only for shapes whose bsdf reads them; analytic uvs for spheres and disks
         self.uv_shapes = {id(s) for s in scene.shapes if reads_uv(s.bsdf)}
@@ -386,6 +389,7 @@ class Packer:
                 rec["position"] = e.position
             elif e.kind == "spot":
                 _pack_spot(rec, e)
+                rec["texture"] = self.materials.tex(e.texture)
             elif e.kind == "directional":
                 rec["direction"] = np.asarray(e.direction) / np.linalg.norm(e.direction)
             elif e.kind == "constant":

@@ -60,7 +60,7 @@ def passes(bsdf: Bsdf) -> bool:
 class MaterialPacker:
     """Indices of every bsdf record and texture of a scene (its structure), and their packing."""
 
-    def __init__(self, roots: list):
+    def __init__(self, roots: list, extra_textures=()):
         self.records: list = []
         self.index: dict = {}
         for b in roots:
@@ -72,10 +72,15 @@ class MaterialPacker:
         self.texture_index: dict = {}
         for b in self.records:
             for t in textures_of(b):
-                for tex in texture_tree(t):
-                    if id(tex) not in self.texture_index:
-                        self.texture_index[id(tex)] = len(self.textures)
-                        self.textures.append(tex)
+                self._add_texture(t)
+        for t in extra_textures:
+            self._add_texture(t)
+
+    def _add_texture(self, root: Texture) -> None:
+        for tex in texture_tree(root):
+            if id(tex) not in self.texture_index:
+                self.texture_index[id(tex)] = len(self.textures)
+                self.textures.append(tex)
 
     def _add(self, b: Bsdf) -> None:
         if id(b) not in self.index:

@@ -185,6 +185,7 @@ class Emitter:
     image: Optional[np.ndarray] = None        # envmap: linear pixels (h, w, c) as read (volcl.scene.images)
     scale: float = 1.0               # envmap: radiance multiplier
     filename: str = ""               # envmap: the image file
+    texture: Optional["Texture"] = None     # spot: Mitsuba's projection texture (a colour texture)
 
 
 @dataclass

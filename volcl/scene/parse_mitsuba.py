@@ -59,7 +59,8 @@ SPECS = {
         "point": Spec({"intensity": "color", "position": "point", **_TO_WORLD}),
         "directional": Spec({"irradiance": "color", "direction": "point", **_TO_WORLD}),
         "constant": Spec({"radiance": "color"}),
-        "spot": Spec({"intensity": "color", "cutoff_angle": "float", "beam_width": "float", **_TO_WORLD}),
+        "spot": Spec({"intensity": "color", "cutoff_angle": "float", "beam_width": "float", **_TO_WORLD},
+                     children=frozenset({"texture"})),
         "envmap": Spec({"filename": "string", "scale": "float", **_TO_WORLD}, ignored={
             "mis_compensation": "volcl samples the map by its luminance as given (the expected image is the "
                                 "same, only the noise differs)"}),
@@ -300,9 +301,14 @@ def _spot(node: Node) -> Emitter:
     if beam > cutoff:
         node.ctx.warn(node.at("beam_width"), f"'beam_width' {beam:g} exceeds 'cutoff_angle' {cutoff:g}: the spot "
                                              f"is a hard-edged cone of the cutoff angle, as in Mitsuba")
+    # Mitsuba's projection texture: the spot's intensity times the texture at the direction's place
+    # in the cone's square (kernels/lights.h spot_texture_uv); only a texture element, as Mitsuba
+    # refuses a constant one
+    textures.check_texture_names(node, ("texture",))
+    child = textures.texture_child(node, "texture")
     return Emitter("spot", node.nonneg_color("intensity", 1.0, kind="emission"),
                    position=tf.apply_point(to_world, np.zeros(3)), to_world=to_world, cutoff_angle=cutoff,
-                   beam_width=beam, source=node.source())
+                   beam_width=beam, source=node.source(), texture=child.obj if child is not None else None)
 
 
 def _envmap(node: Node) -> Emitter:
