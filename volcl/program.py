@@ -10,6 +10,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import shlex
 import time
 from functools import lru_cache
 from pathlib import Path
@@ -40,19 +41,32 @@ def sources_hash() -> str:
     return h.hexdigest()[:16]
 
 
+def env_build_options() -> list[str]:
+    """Options from VOLCL_BUILD_OPTIONS, appended to every kernel build (shell-style quoting), so
+    tools such as Oclgrind (which needs -cl-opt-disable) or a driver's own flags can be used
+    without editing code."""
+    return shlex.split(os.environ.get("VOLCL_BUILD_OPTIONS", ""))
+
+
 def build_options(features: dict[str, bool], extra: tuple[str, ...] = ()) -> list[str]:
     return ([f"-I{kernels_dir()}", "-cl-std=CL1.2", f"-DVOLCL_SOURCE_HASH=0x{sources_hash()}"]
-            + feat.defines(features) + list(extra))
+            + feat.defines(features) + list(extra) + env_build_options())
 
 
 _cache: dict = {}
 last_build_seconds: dict = {}
 
 
+def _key(ctx, features, source_file, extra) -> tuple:
+    # the environment's options are part of the key: changing VOLCL_BUILD_OPTIONS rebuilds
+    return (id(ctx), str(source_file), tuple(sorted(features.items())), tuple(extra),
+            tuple(env_build_options()))
+
+
 def build_program(ctx, features: dict[str, bool], source_file=ENTRY_FILE,
                   extra: tuple[str, ...] = ()):
     """The built program for this context and feature set; built at most once per process."""
-    key = (id(ctx), str(source_file), tuple(sorted(features.items())), extra)
+    key = _key(ctx, features, source_file, extra)
     prog = _cache.get(key)
     if prog is None:
         # test kernels pass a path of their own; they include volcl's headers through -I
@@ -67,7 +81,7 @@ def build_program(ctx, features: dict[str, bool], source_file=ENTRY_FILE,
 
 
 def build_seconds(ctx, features, source_file: str = ENTRY_FILE, extra: tuple[str, ...] = ()) -> float:
-    return last_build_seconds.get((id(ctx), str(source_file), tuple(sorted(features.items())), extra), 0.0)
+    return last_build_seconds.get(_key(ctx, features, source_file, extra), 0.0)
 
 
 def _build_log_path() -> Path:
