@@ -5,7 +5,11 @@ device whose compiler then fails every build.
 """
 from __future__ import annotations
 
+import hashlib
 import os
+import shutil
+import sys
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,7 +33,60 @@ def _prepare_environment():
         os.environ["POCL_CACHE_DIR"] = str(cache)
 
 
+# OpenCL drivers that install from PyPI into a Python environment, with no system .icd file:
+# Intel's CPU runtime (intel-opencl-rt) puts libintelocl.so in <prefix>/lib.
+PYPI_DRIVERS = ("libintelocl.so",)
+SYSTEM_VENDORS = Path("/etc/OpenCL/vendors")
+
+
+def _cache_base() -> Path:
+    return Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "volcl"
+
+
+def _register_pypi_drivers():
+    """Make drivers installed by pip into this environment visible to the OpenCL loader.
+
+    The ICD loader finds drivers through the .icd files in /etc/OpenCL/vendors, or in the folder
+    OCL_ICD_VENDORS names instead: that folder replaces the system one, it does not add to it. So
+    when this environment holds such a driver and OCL_ICD_VENDORS is unset, volcl writes a folder
+    with an .icd file for it beside a copy of every system .icd file (PoCL, GPU drivers), and
+    points OCL_ICD_VENDORS there for this process. A user's own OCL_ICD_VENDORS is left alone."""
+    if "OCL_ICD_VENDORS" in os.environ:
+        return
+    libs = [p for p in (Path(sys.prefix) / "lib" / name for name in PYPI_DRIVERS) if p.is_file()]
+    if not libs:
+        return
+    system = os.environ.get("OPENCL_VENDOR_PATH", str(SYSTEM_VENDORS))
+    entries = {}
+    try:
+        for f in sorted(Path(system).glob("*.icd")):
+            entries[f.name] = f.read_text()
+    except OSError:
+        pass
+    for lib in libs:
+        entries[f"pypi-{lib.stem}.icd"] = f"{lib}\n"
+    digest = hashlib.sha256(repr(sorted(entries.items())).encode()).hexdigest()[:16]
+    import tempfile
+    for base in (_cache_base(), Path(tempfile.gettempdir()) / f"volcl-{os.getuid()}"):
+        folder = base / f"icd-{digest}"
+        try:
+            if not folder.is_dir():
+                tmp = base / f"icd-{digest}.{os.getpid()}.tmp"
+                tmp.mkdir(parents=True, exist_ok=True)
+                for name, text in entries.items():
+                    (tmp / name).write_text(text)
+                try:
+                    os.rename(tmp, folder)
+                except OSError:     # another process made it first
+                    shutil.rmtree(tmp, ignore_errors=True)
+            os.environ["OCL_ICD_VENDORS"] = str(folder)
+            return
+        except OSError:
+            continue
+
+
 _prepare_environment()
+_register_pypi_drivers()
 import pyopencl as cl  # noqa: E402  (needs the environment above)
 
 
@@ -86,6 +143,35 @@ def kernels_build(info: DeviceInfo) -> tuple[bool, str]:
         return False, text[-1] if text else type(exc).__name__
 
 
+class DeviceSkipped(UserWarning):
+    """A device the default choice passed over because volcl's kernels fail on it."""
+
+
+def is_simulator(info: DeviceInfo) -> bool:
+    """Oclgrind simulates a device thousands of times slower than any real one: it is used only
+    when selected by name, and not self-tested (the test would take many minutes)."""
+    return "oclgrind" in info.platform_name.lower()
+
+
+_checked: dict = {}
+
+
+def check(info: DeviceInfo) -> tuple[bool, str]:
+    """Whether volcl can trust this device: its kernels build (every feature on) and it passes the
+    self-test (volcl/selftest.py); otherwise why not. Checked once per device and process."""
+    key = (info.platform_index, info.device_index, info.platform_name, info.name)
+    if key not in _checked:
+        ok, why = kernels_build(info)
+        if ok and not is_simulator(info):
+            from . import selftest
+            result = selftest.run(info)
+            ok, why = result.ok, ("" if result.ok else f"self-test failed: {result.message}")
+        elif not ok:
+            why = f"kernels do not build: {why}"
+        _checked[key] = (ok, why)
+    return _checked[key]
+
+
 def _match(devs: list[DeviceInfo], sel: str) -> list[DeviceInfo]:
     sel = sel.strip()
     if sel.lower() in ("cpu", "gpu"):
@@ -99,7 +185,9 @@ def _match(devs: list[DeviceInfo], sel: str) -> list[DeviceInfo]:
 
 def choose(selector: str | None = None) -> DeviceInfo:
     """The device to render on: `selector` (or VOLCL_DEVICE) narrows the candidates; among them the
-    first whose kernels build wins, GPUs before other devices."""
+    first that passes check() (kernels build, self-test passes) wins, GPUs before other devices.
+    Each candidate passed over is named in a DeviceSkipped warning; simulators are candidates only
+    when the selector names them."""
     selector = selector or os.environ.get("VOLCL_DEVICE") or None
     devs = list_devices()
     if not devs:
@@ -111,14 +199,15 @@ def choose(selector: str | None = None) -> DeviceInfo:
             raise VolclError(f"no OpenCL device matches --device {selector!r}; available: {listing}; "
                              "select by index 'P:D', a name substring, 'cpu' or 'gpu'")
     else:
-        candidates = sorted(devs, key=lambda d: d.kind != "gpu")
+        candidates = sorted((d for d in devs if not is_simulator(d)), key=lambda d: d.kind != "gpu")
     failures = []
     for d in candidates:
-        ok, why = kernels_build(d)
+        ok, why = check(d)
         if ok:
             return d
-        failures.append(f"{d.key} {d.name}: {why}")
-    raise VolclError("volcl's kernels build on no OpenCL device (" + "; ".join(failures) + f"); {INSTALL_HINT}")
+        failures.append(f"{d.key} {d.name} ({d.platform_name}): {why}")
+        warnings.warn(f"skipping OpenCL device {failures[-1]}", DeviceSkipped, stacklevel=2)
+    raise VolclError("no OpenCL device passes volcl's checks (" + "; ".join(failures) + f"); {INSTALL_HINT}")
 
 
 def _size(n: int) -> str:
