@@ -33,7 +33,7 @@ VOLCL_KERNEL void render_pass(__global const BvhNode *nodes, __global const int 
                           __global float4 *sums, __global float4 *sums_sq, __global uint *invalid,
                           __global uint *cutoffs,
                           uint sample_base, int first_pixel, int pixel_count, int slots) {
-    int gid = get_global_id(0);
+    int gid = (int)get_global_id(0);     /* launches stay below 2^31 work items (render.py) */
     if (gid >= pixel_count * slots) return;
     int slot = gid / pixel_count;
     int pixel = first_pixel + gid % pixel_count;

@@ -14,6 +14,8 @@ from volcl.features import detect
 from volcl.render import render
 from volcl.scene.model import Emitter, rgb
 
+pytestmark = pytest.mark.every_implementation
+
 SPAN = 1000.0   # EQUIANGULAR_SPAN in kernels/equiangular.h
 
 # (what, origin, direction, light, t_max)
