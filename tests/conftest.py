@@ -59,6 +59,8 @@ def pytest_addoption(parser):
 def pytest_configure(config):
     config.addinivalue_line("markers", "every_implementation: run on every OpenCL implementation present "
                                        "(parametrizes the device fixture)")
+    import stats    # the sampling suite's family-wise significance covers every implementation tested
+    stats.SUITE_TESTS = stats.SUITE_TESTS_PER_IMPLEMENTATION * len(_selected_implementations(config))
 
 
 _selected = None
