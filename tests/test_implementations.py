@@ -89,6 +89,7 @@ def test_self_test_rejects_the_miscompiled_kernels(monkeypatch):
     others = [d for d in devmod.list_devices() if d.platform_index != intel.platform_index
               and not devmod.is_simulator(d)]
     monkeypatch.setattr(devmod, "list_devices", lambda: [intel] + others)
+    monkeypatch.setattr(devmod, "_preference", lambda d: 0)     # Intel's runtime tried first
     if not others:
         with pytest.raises(VolclError, match="self-test failed"):
             devmod.choose()
@@ -106,15 +107,25 @@ def test_self_test_passes(device):
 
 def test_choice_skips_a_failing_device_and_names_it(monkeypatch):
     devs = [d for d in devmod.list_devices() if not devmod.is_simulator(d)]
-    bad, good = devmod.DeviceInfo(9, 0, devs[0].device, "Broken Platform"), devs[0]
+    good = devs[0]
+    bad = devmod.DeviceInfo(9, 0, good.device, good.platform_name + " (Broken Platform)")
     monkeypatch.setattr(devmod, "list_devices", lambda: [bad, good])
     monkeypatch.setattr(devmod, "check", lambda d: (False, "self-test failed: furnace 0.5 expected 2")
                         if d is bad else (True, ""))
-    with pytest.warns(devmod.DeviceSkipped, match=r"9:0 .*\(Broken Platform\): self-test failed: furnace"):
+    with pytest.warns(devmod.DeviceSkipped, match=r"9:0 .*\(Broken Platform\)\): self-test failed: furnace"):
         assert devmod.choose() is good
     monkeypatch.setattr(devmod, "list_devices", lambda: [bad])
     with pytest.raises(VolclError, match=r"no OpenCL device passes volcl's checks \(9:0 .*Broken Platform"):
         devmod.choose()
+
+
+def test_default_choice_prefers_pocl_among_cpu_devices(monkeypatch):
+    """Whatever order the loader lists platforms in (README: PoCL is the faster CPU runtime here)."""
+    found = {implementation_id(d): d for d in implementations()}
+    if not {"pocl", "intel"} <= set(found):
+        pytest.skip("needs both PoCL and Intel's CPU runtime")
+    monkeypatch.setattr(devmod, "list_devices", lambda: [found["intel"], found["pocl"]])
+    assert devmod.choose() is found["pocl"]
 
 
 def test_simulators_are_chosen_only_by_name(monkeypatch):
