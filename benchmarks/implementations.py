@@ -57,7 +57,7 @@ def log(msg):
 
 def worker(platform: str, scenes: list[str], width: int, height: int, spp: int):
     from volcl import device as devmod
-    from volcl.render import Renderer
+    from volcl.renderer import Renderer
     from volcl.scene import load
     devs = [d for d in devmod.list_devices() if platform in d.platform_name.lower()]
     if not devs:

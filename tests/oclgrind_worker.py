@@ -16,7 +16,7 @@ from scenebuild import (camera, constant_env, diffuse, furnace, look_at, medium,
                         scene, sphere)
 from volcl import device as devmod  # noqa: E402
 from volcl.features import all_features  # noqa: E402
-from volcl.render import Renderer  # noqa: E402
+from volcl.renderer import Renderer  # noqa: E402
 from volcl.scene import load  # noqa: E402
 from volcl.scene.model import Bsdf, Emitter, Shape, rgb  # noqa: E402
 

@@ -23,7 +23,7 @@ from volcl.device import cl
 from volcl.errors import VolclError
 from volcl.features import all_features
 from volcl.program import build_options, env_build_options
-from volcl.render import Renderer
+from volcl.renderer import Renderer
 from volcl.scene import load
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -83,7 +83,7 @@ def test_self_test_rejects_the_miscompiled_kernels(monkeypatch):
     the self-test says so, and the default choice skips the device by name."""
     intel = _intel()
     monkeypatch.setenv("VOLCL_BUILD_OPTIONS", "-DVOLCL_KERNEL=__kernel")
-    monkeypatch.setattr(devmod, "_checked", {})
+    monkeypatch.setattr(intel, "_trusted", None)
     result = selftest.run(intel)
     assert not result.ok and "standard errors" in result.message, result.message
     others = [d for d in devmod.list_devices() if d.platform_index != intel.platform_index

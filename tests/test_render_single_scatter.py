@@ -12,7 +12,7 @@ import pytest
 
 from imagestats import assert_mean_matches
 from scenebuild import box_mesh, camera, diffuse, look_at, medium, quad_mesh, scene
-from volcl.render import render
+from volcl.renderer import render
 from volcl.scene.model import Bsdf, Shape, rgb
 
 pytestmark = pytest.mark.every_implementation

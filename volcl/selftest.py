@@ -120,7 +120,7 @@ def _z_failures(what, res, expected) -> list[str]:
 def run(info) -> SelfTest:
     """Render the self-test scenes on device `info` (a volcl.device.DeviceInfo)."""
     from .features import detect
-    from .render import Renderer
+    from .renderer import Renderer
     t0 = time.perf_counter()
     wall, furnace_sc = wall_scene(), furnace_scene()
     # one program for both scenes (one build): the union of what they use
