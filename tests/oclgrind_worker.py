@@ -46,6 +46,40 @@ def emissive_media():
     return furnace(0.3, radiance=0.5, medium=medium([1.0, 2.0, 0.5], [0.3, 0.6, 0.0], g=0.4, radiance=0.7))
 
 
+SENSOR = """<sensor type="{kind}">{extra}
+    <transform name="to_world"><lookat origin="0, 0.5, 4" target="0, -0.3, 0" up="0, 1, 0"/></transform>
+    <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/></film>
+</sensor>"""
+ROOM = """<shape type="rectangle"><transform name="to_world"><scale value="0.5"/><rotate x="1" angle="90"/>
+    <translate y="2"/></transform><emitter type="area"><rgb name="radiance" value="8"/></emitter></shape>
+<shape type="rectangle"><transform name="to_world"><scale value="3"/><rotate x="1" angle="-90"/>
+    <translate y="-1"/></transform><bsdf type="diffuse"><rgb name="reflectance" value="0.7, 0.5, 0.3"/></bsdf>
+</shape>"""
+
+
+def mitsuba(body):
+    from volcl.scene import load_string
+    return lambda: load_string(f'<scene version="3.0.0">{body}</scene>')
+
+
+CYLINDERS = mitsuba(SENSOR.format(kind="perspective", extra='<float name="fov" value="45"/>') + ROOM + """
+<shape type="cylinder"><float name="radius" value="0.3"/><point name="p0" value="-0.6, -1, 0"/>
+    <point name="p1" value="-0.6, 0.2, 0"/><bsdf type="diffuse"/></shape>
+<shape type="cylinder"><float name="radius" value="0.3"/><point name="p0" value="0.6, -1, 0"/>
+    <point name="p1" value="0.6, 0.2, 0.3"/><bsdf type="dielectric"/></shape>""")
+THINLENS = mitsuba(SENSOR.format(kind="thinlens", extra='<float name="fov" value="45"/><float name="aperture_radius" '
+                                 'value="0.2"/><float name="focus_distance" value="3.5"/>') + ROOM
+                   + '<shape type="sphere"><float name="radius" value="0.4"/></shape>')
+ORTHOGRAPHIC = mitsuba(SENSOR.format(kind="orthographic", extra="").replace("<lookat", '<scale x="1.5" y="1.5"/><lookat')
+                       + ROOM + '<shape type="sphere"><float name="radius" value="0.4"/></shape>')
+DIRECT = mitsuba('<integrator type="direct"><integer name="emitter_samples" value="2"/>'
+                 '<integer name="bsdf_samples" value="1"/></integrator>'
+                 + SENSOR.format(kind="perspective", extra='<float name="fov" value="45"/>') + ROOM
+                 + '<emitter type="point"><point name="position" value="-1, 1, 1"/><rgb name="intensity" value="1"/>'
+                 '</emitter><shape type="sphere"><float name="radius" value="0.4"/><bsdf type="dielectric"/></shape>'
+                 '<emitter type="constant"><rgb name="radiance" value="0.05"/></emitter>')
+
+
 def every_feature():
     """The fog scene on the program with every feature compiled in."""
     return load(SCENES / "fog.xml"), all_features()
@@ -62,6 +96,10 @@ FAMILIES = {
     "emissive_media": emissive_media,
     "grid_media": shipped("smoke_grid"),
     "equiangular": shipped("point_in_fog"),
+    "cylinders": CYLINDERS,
+    "thinlens_camera": THINLENS,
+    "orthographic_camera": ORTHOGRAPHIC,
+    "direct_integrator": DIRECT,
     "every_feature": every_feature,
 }
 

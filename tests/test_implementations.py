@@ -190,3 +190,36 @@ def test_pip_installed_driver_is_registered(tmp_path):
     r = subprocess.run([sys.executable, "-c", probe.split(";")[0] + "; from volcl import device; "
                         "print(os.environ['OCL_ICD_VENDORS'])"], env=env, capture_output=True, text=True)
     assert r.stdout.strip() == str(tmp_path / "mine"), r.stderr
+
+
+CLI = "import sys; from volcl.cli import main; sys.exit(main(sys.argv[1:]))"
+# the same, with Intel's runtime tried before PoCL by the default choice
+CLI_INTEL_FIRST = ("import sys; import volcl.device as d; d._preference = lambda x: 'intel' not in "
+                   "x.platform_name.lower(); from volcl.cli import main; sys.exit(main(sys.argv[1:]))")
+
+
+def _volcl(*args, code=CLI, **env):
+    env = dict(os.environ, PYTHONPATH=str(ROOT), **env)
+    return subprocess.run([sys.executable, "-c", code, *map(str, args)], cwd=ROOT, env=env,
+                          capture_output=True, text=True)
+
+
+def test_command_line_names_a_device_that_fails_the_self_test(tmp_path):
+    """With the hint taken away Intel's runtime fails the self-test: `volcl devices` shows it, a
+    render asked of that device stops with it named, and the default choice skips it, saying so."""
+    intel = _intel()
+    broken = {"VOLCL_BUILD_OPTIONS": "-DVOLCL_KERNEL=__kernel"}
+    r = _volcl("devices", **broken)
+    assert r.returncode == 0, r.stderr
+    line = next(ln for ln in r.stdout.splitlines() if ln.startswith(intel.key + " "))
+    assert " FAIL " in line and "standard errors" in line, line
+    out = tmp_path / "x.exr"
+    r = _volcl("render", "scenes/cbox.xml", "-o", out, "--spp", 1, "--device", "Intel", **broken)
+    assert r.returncode == 2
+    assert f"{intel.key} {intel.name} ({intel.platform_name}): self-test failed" in r.stderr, r.stderr
+    assert not out.exists()
+    r = _volcl("render", "scenes/cbox.xml", "-o", out, "--spp", 1, "--width", 8, "--height", 8, "-q",
+               code=CLI_INTEL_FIRST, **broken)
+    assert r.returncode == 0, r.stderr
+    assert f"volcl: warning: skipping OpenCL device {intel.key} {intel.name}" in r.stderr, r.stderr
+    assert out.exists()

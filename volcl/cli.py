@@ -5,6 +5,7 @@ import argparse
 import math
 import sys
 import time
+import warnings
 from pathlib import Path
 
 from . import __version__
@@ -171,6 +172,21 @@ def cmd_converge(args):
     return 0
 
 
+def _show_skipped_devices():
+    """A device the default choice passes over (volcl.device.DeviceSkipped) is named on stderr as
+    `volcl: warning: ...`, every time, instead of in Python's warning format."""
+    from .device import DeviceSkipped
+    shown = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, DeviceSkipped):
+            print(f"volcl: warning: {message}", file=sys.stderr, flush=True)
+        else:
+            shown(message, category, filename, lineno, file, line)
+    warnings.showwarning = show
+    warnings.simplefilter("always", DeviceSkipped)
+
+
 def main(argv=None):
     from .estimator import CHOICES
     p = argparse.ArgumentParser(prog="volcl", description="volcl: a volumetric path tracer on OpenCL")
@@ -264,7 +280,9 @@ def main(argv=None):
 
     args = p.parse_args(argv)
     try:
-        return args.func(args)
+        with warnings.catch_warnings():
+            _show_skipped_devices()
+            return args.func(args)
     except VolclError as exc:
         print(f"volcl: error: {exc}", file=sys.stderr)
         return 2
