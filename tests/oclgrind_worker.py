@@ -80,6 +80,16 @@ DIRECT = mitsuba('<integrator type="direct"><integer name="emitter_samples" valu
                  '<emitter type="constant"><rgb name="radiance" value="0.05"/></emitter>')
 
 
+def phase_blends():
+    """Nested blends of Rayleigh, Draine, a table and HG, in a medium furnace."""
+    from volcl.scene.model import Phase
+    inner = Phase("blend", weight=0.6, phases=(Phase("rayleigh"), Phase("tabulated", values=np.array([0.2, 1.0, 3.0]))))
+    outer = Phase("blend", weight=0.3, phases=(Phase("draine", g=0.5, alpha=1.0), inner))
+    fog = medium(1.5, 0.9)
+    fog.phase = outer
+    return furnace(0.5, medium=fog)
+
+
 def every_feature():
     """The fog scene on the program with every feature compiled in."""
     return load(SCENES / "fog.xml"), all_features()
@@ -96,6 +106,9 @@ FAMILIES = {
     "emissive_media": emissive_media,
     "grid_media": shipped("smoke_grid"),
     "equiangular": shipped("point_in_fog"),
+    "phase_families_mie": shipped("fog_mie"),
+    "phase_families_fournier_forand": shipped("underwater_ff"),
+    "phase_families_blends": phase_blends,
     "cylinders": CYLINDERS,
     "thinlens_camera": THINLENS,
     "orthographic_camera": ORTHOGRAPHIC,
