@@ -16,7 +16,7 @@
     sc.params = params;
 
 /* envmap_sample of light `light`: direction, radiance and solid-angle pdf (0 where it fails). */
-__kernel void envmap_samples(__global const Light *lights, __global const float *env_data,
+VOLCL_KERNEL void envmap_samples(__global const Light *lights, __global const float *env_data,
                              __global const RenderParams *params, __global float *dirs, __global float *values,
                              __global float *pdfs, int light, uint seed) {
     int i = get_global_id(0);
@@ -31,7 +31,7 @@ __kernel void envmap_samples(__global const Light *lights, __global const float 
 }
 
 /* light_sample from point `ref` (the light picked by u_pick as the integrator picks it). */
-__kernel void light_samples(__global const Light *lights, __global const float *env_data,
+VOLCL_KERNEL void light_samples(__global const Light *lights, __global const float *env_data,
                             __global const RenderParams *params, __global float *dirs, __global float *values,
                             __global float *pdfs, __global int *picked, float rx, float ry, float rz, uint seed) {
     int i = get_global_id(0);
@@ -47,7 +47,7 @@ __kernel void light_samples(__global const Light *lights, __global const float *
 }
 
 /* The environment's radiance and light-sampling pdf (light choice included) along given directions. */
-__kernel void env_emission(__global const Light *lights, __global const float *env_data,
+VOLCL_KERNEL void env_emission(__global const Light *lights, __global const float *env_data,
                            __global const RenderParams *params, __global const float *dirs_in,
                            __global float *values, __global float *pdfs) {
     int i = get_global_id(0);
@@ -58,14 +58,14 @@ __kernel void env_emission(__global const Light *lights, __global const float *e
 }
 
 /* Intensity of point or spot light `light` towards given world directions (away from the light). */
-__kernel void point_intensity(__global const Light *lights, __global const float *dirs_in, __global float *values,
+VOLCL_KERNEL void point_intensity(__global const Light *lights, __global const float *dirs_in, __global float *values,
                               int light) {
     int i = get_global_id(0);
     vstore3(light_point_intensity(&lights[light], normalize(vload3(i, dirs_in))), i, values);
 }
 
 /* sample_linear on (a, b): points in [0, 1). */
-__kernel void linear_samples(__global float *out, float a, float b, uint seed) {
+VOLCL_KERNEL void linear_samples(__global float *out, float a, float b, uint seed) {
     int i = get_global_id(0);
     Rng r = rng_init(seed, (uint)i, 0u);
     out[i] = sample_linear(rng_next_float(&r), a, b);

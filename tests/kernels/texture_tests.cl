@@ -10,7 +10,7 @@
 #include "bsdf.h"
 
 /* Texture `index` at uv[i]: as a colour (eval3), as a float (eval1) and its gradient (grad1). */
-__kernel void texture_lookups(__global const Texture *textures, __global const float *texels,
+VOLCL_KERNEL void texture_lookups(__global const Texture *textures, __global const float *texels,
                               __global const float *uvs, __global float *colour, __global float *value,
                               __global float *grad, int index) {
     int i = get_global_id(0);
@@ -24,7 +24,7 @@ __kernel void texture_lookups(__global const Texture *textures, __global const f
 }
 
 /* uv, dp/du and dp/dv where ray i first hits the scene; hit[i] the shape index, or -1. */
-__kernel void surface_uvs(__global const BvhNode *nodes, __global const int *prim_ids,
+VOLCL_KERNEL void surface_uvs(__global const BvhNode *nodes, __global const int *prim_ids,
                           __global const Triangle *triangles, __global const TriangleNormals *normals,
                           __global const Sphere *spheres, __global const Cylinder *cylinders,
                           __global const ShapeInfo *shapes, __global const TriangleUv *tri_uvs,
