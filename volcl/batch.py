@@ -182,11 +182,18 @@ def load_scene(path, options: SceneOptions):
                    warn=lambda w: print(f"warning: {w}", file=sys.stderr))
 
 
-def render_job(job: Job, device, stop: StopRequest, scene_options: SceneOptions, render: RenderOptions,
-               output: OutputOptions):
-    """Render one scene into job.output, updating job. Raises VolclError for what a user can fix."""
+def _notify(text: str):
+    print(f"volcl: warning: {text}", file=sys.stderr, flush=True)
+
+
+def render_job(job: Job, devices, stop: StopRequest, scene_options: SceneOptions, render: RenderOptions,
+               output: OutputOptions, executor=None):
+    """Render one scene into job.output, updating job, on `devices` (a list of volcl Devices: one
+    device, or a render shared by several, volcl.rounds) or on `executor`'s workers (a cluster).
+    Raises VolclError for what a user can fix."""
     from .image import check_writable, write_image
     from .renderer import Renderer
+    from .rounds import WorkersFailed, renderer_for
     out = check_writable(job.output)
     scene = load_scene(job.scene, scene_options)
     defines = scene_options.defines
@@ -206,7 +213,8 @@ def render_job(job: Job, device, stop: StopRequest, scene_options: SceneOptions,
             print(f"{out}: already rendered with {spp} spp or more; kept", flush=True)
             return
     seed = render.seed if render.seed is not None else (meta["seed"] if meta else None)
-    renderer = Renderer(scene, device=device, features=render.features, seed=seed, estimator=estimator)
+    renderer = renderer_for(scene, devices, executor, seed=seed, estimator=estimator, features=render.features,
+                            tile_size=render.tile_size, notify=_notify)
     ident = checkpoint.identity(renderer, job.scene, defines)
     if state is not None:
         checkpoint.check(ckpt, meta, ident, renderer.seed)
@@ -215,7 +223,11 @@ def render_job(job: Job, device, stop: StopRequest, scene_options: SceneOptions,
     elif ckpt.is_file():
         print(f"volcl: warning: {ckpt} exists and is ignored (--resume continues from it); it will be "
               "replaced", file=sys.stderr)
-    if output.verbose:
+    if output.verbose and not isinstance(renderer, Renderer):
+        print(f"{job.scene}: {renderer.packed.triangle_count} triangles, {renderer.packed.sphere_count} spheres, "
+              f"BVH {renderer.packed.bvh_seconds:.2f} s, {len(renderer.tile_list)} tiles on "
+              f"{renderer.device_label}", file=sys.stderr)
+    elif output.verbose:
         if not renderer.built:
             build = "kernel program reused (built earlier in this run)"
         elif renderer.build_was_cold:
@@ -241,10 +253,13 @@ def render_job(job: Job, device, stop: StopRequest, scene_options: SceneOptions,
         return stop.requested
 
     progress = Progress(Path(job.scene).name, renderer.samples_done, spp, output.quiet)
+    failed = None
     try:
         result = renderer.render(None if spp is None else max(spp - renderer.samples_done, 0),
                                  progress=progress.update, stop=after_pass, time_limit=render.time_limit,
                                  target_error=render.target_error, min_spp=render.min_spp)
+    except WorkersFailed as exc:        # every device (worker) failed: keep what every pixel has
+        failed, result = exc, exc.result
     finally:
         progress.close()
     result.info["spp_requested"] = spp or 0     # the total asked for, across resumed sessions
@@ -256,6 +271,9 @@ def render_job(job: Job, device, stop: StopRequest, scene_options: SceneOptions,
     if complete and not output.keep_checkpoint and ckpt.is_file():
         ckpt.unlink()
     job.spp, job.seconds = result.spp, result.seconds
+    if failed is not None:
+        kept = f" and {ckpt} (continue with --resume)" if interval is not None else ""
+        raise VolclError(f"{failed}; wrote the image of the {result.spp} spp every pixel has to {out}{kept}")
     if complete:
         job.status = f"ok (resumed at {resumed_at} spp)" if resumed_at else "ok"
     else:
@@ -264,12 +282,22 @@ def render_job(job: Job, device, stop: StopRequest, scene_options: SceneOptions,
         print(f"volcl: interrupted after {result.spp} spp; wrote {out}{kept}", file=sys.stderr, flush=True)
     print(f"{out}: {result.spp} spp in {result.seconds:.2f} s ({_STOPPED[result.stop_reason]}), "
           f"{result.samples_per_second / 1e6:.2f} M samples/s, relative error {100 * result.rel_error:.2f}%, "
-          f"invalid samples {result.invalid}, tracking cut-offs {result.tracking_cutoffs}, device {result.device}, "
+          f"invalid samples {result.invalid}, tracking cut-offs {result.tracking_cutoffs}, {_devices_text(result)}, "
           f"features {result.stats['features']}", flush=True)
 
 
+def _devices_text(result) -> str:
+    """'device D' or 'devices D1 (52%), D2 (48%)', with the devices that failed."""
+    if not result.shares:
+        return f"device {result.device}"
+    parts = [f"{label} ({100 * share:.0f}%)" for label, share in result.shares.items()]
+    failed = [f"{label} failed: {why}" for label, why in result.info.get("failures", [])]
+    noun = "workers" if result.info.get("cluster") else "devices"
+    return f"{noun} {', '.join(parts)}" + (f" [{'; '.join(failed)}]" if failed else "")
+
+
 _STOPPED = {"spp": "spp reached", "time": "time limit reached", "error": "target error reached",
-            "stopped": "interrupted"}
+            "stopped": "interrupted", "failed": "every device failed"}
 
 
 def print_table(jobs: list[Job], file=sys.stdout):
@@ -288,8 +316,8 @@ def print_table(jobs: list[Job], file=sys.stdout):
 
 def run(scenes: list, device=None, scene_options: SceneOptions | None = None,
         render: RenderOptions | None = None, output: OutputOptions | None = None) -> int:
-    """Render every scene file of `scenes` on `device` (a volcl.Device, a selector or None); the
-    exit status: 0, EXIT_FAILED if a scene failed, 128 + the signal number if interrupted."""
+    """Render every scene file of `scenes` on `device` (a volcl.Device, a list of them, a selector
+    such as 'all' or '0:0,0:1', or None: volcl.device.resolve_many); the exit status: 0, EXIT_FAILED if a scene failed, 128 + the signal number if interrupted."""
     from . import device as devmod
     scene_options = scene_options or SceneOptions()
     render = render or RenderOptions()
@@ -300,12 +328,12 @@ def run(scenes: list, device=None, scene_options: SceneOptions | None = None,
     jobs = [Job(str(s), o) for s, o in zip(scenes, outs)]
     single = len(jobs) == 1
     with StopRequest() as stop:
-        dev = devmod.resolve(device)
+        devices = devmod.resolve_many(device)
         for job in jobs:
             if stop.requested:
                 break
             try:
-                render_job(job, dev, stop, scene_options, render, output)
+                render_job(job, devices, stop, scene_options, render, output)
             except Exception as exc:
                 if single:
                     raise

@@ -61,7 +61,8 @@ def cmd_render(args):
                            checkpoint_every=args.checkpoint_every, resume=args.resume,
                            keep_checkpoint=args.keep_checkpoint, quiet=args.quiet, verbose=args.verbose)
     render = RenderOptions(spp=args.spp, seed=args.seed, time_limit=args.time_limit, target_error=args.target_error,
-                           min_spp=args.min_spp, estimator=_estimator(args), features=_features(args))
+                           min_spp=args.min_spp, estimator=_estimator(args), features=_features(args),
+                           tile_size=args.tile_size)
     return batch.run(args.scenes, args.device, _scene_options(args), render, output)
 
 
@@ -171,7 +172,9 @@ def main(argv=None):
                         help="override a scene <default> parameter")
         sp.add_argument("--width", type=int)
         sp.add_argument("--height", type=int)
-        sp.add_argument("--device", help="device index P:D, name substring, 'cpu' or 'gpu' (default: $VOLCL_DEVICE)")
+        sp.add_argument("--device", help="device index P:D, name substring, 'cpu' or 'gpu' (default: $VOLCL_DEVICE)"
+                        + ("; 'all' or a list 'A,B,...': one render on several devices" if sp.prog.endswith("render")
+                           else "; of a list, the first"))
         sp.add_argument("--features", help="'all': compile every feature instead of only the scene's")
         sp.add_argument("-v", "--verbose", action="store_true")
 
@@ -206,6 +209,9 @@ def main(argv=None):
                    help="stop once the image's estimated relative error is at most E (e.g. 0.02)")
     r.add_argument("--min-spp", type=int, default=16, metavar="N",
                    help="samples per pixel before --target-error trusts the estimate (default 16)")
+    r.add_argument("--tile-size", type=int, metavar="PIXELS",
+                   help="tile size of a render on several devices (default: 8 or more tiles per device, "
+                        "at most 64 pixels square)")
     estimator_opts(r)
     scene_opts(r)
     r.set_defaults(func=cmd_render)
