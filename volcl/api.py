@@ -87,7 +87,7 @@ def _progress(progress, scene: Scene, spp):
 
 def render(scene, spp: int | None = None, seed: int | None = None, device=None, time_limit: float | None = None,
            target_error: float | None = None, progress=None, estimator: Estimator | None = None,
-           tile=None, tile_size=None) -> RenderResult:
+           tile=None, tile_size=None, scheduler=None) -> RenderResult:
     """Render `scene` and return a RenderResult (numpy image and variance, spp, seconds, invalid
     samples, stop reason, metadata).
 
@@ -106,6 +106,9 @@ def render(scene, spp: int | None = None, seed: int | None = None, device=None, 
                 volcl.merge joins tiles into the image, bit for bit (on one device)
     tile_size   the tiles' size in pixels (one number or (width, height)) of a render on several
                 devices (default: volcl.rounds.default_tile_size)
+    scheduler   render on a Dask cluster instead (volcl.cluster): a distributed.Client, a
+                scheduler address, or 'local:N' (N single-threaded worker processes here); the
+                image is bit for bit a local render's on the same device implementation
 
     The scene stays uploaded to the device, and each kernel feature set is built once per device,
     so renders in a loop (after traverse() edits, too) pay only for their samples. Values set
@@ -113,6 +116,9 @@ def render(scene, spp: int | None = None, seed: int | None = None, device=None, 
     scene = _prepared(scene)
     if scene.pending:
         apply_pending(scene, stacklevel=2)
+    if scheduler is not None:
+        return _render_on_cluster(scene, scheduler, spp, seed, time_limit, target_error, progress, estimator,
+                                  tile, tile_size, device)
     devices = devmod.resolve_many(device)
     if len(devices) == 1 and tile_size is None:
         r = Renderer(scene, device=devices[0], seed=seed, estimator=estimator, tile=tile)
@@ -129,6 +135,30 @@ def render(scene, spp: int | None = None, seed: int | None = None, device=None, 
         return r.render(spp, progress=callback, time_limit=time_limit, target_error=target_error)
     finally:
         close()
+
+
+def _render_on_cluster(scene, scheduler, spp, seed, time_limit, target_error, progress, estimator, tile,
+                       tile_size, device) -> RenderResult:
+    from . import cluster
+    from .rounds import renderer_for
+    if tile is not None or device is not None:
+        raise VolclError("scheduler= renders on the cluster's workers, each with the device it chose (volcl "
+                         "worker --device); tile= and device= are for renders on this machine")
+    client = cluster.connect(scheduler)
+    executor = cluster.DaskExecutor(client)
+    try:
+        r = renderer_for(scene, executor=executor, seed=seed, estimator=estimator, tile_size=tile_size)
+        if spp is None and time_limit is None and target_error is None:
+            spp = scene.spp
+        callback, close = _progress(progress, scene, spp)
+        try:
+            return r.render(spp, progress=callback, time_limit=time_limit, target_error=target_error)
+        finally:
+            close()
+    finally:
+        executor.close()
+        if client is not scheduler:
+            cluster.close(client)
 
 
 def write(result: RenderResult, path) -> Path:

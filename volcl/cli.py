@@ -63,7 +63,31 @@ def cmd_render(args):
     render = RenderOptions(spp=args.spp, seed=args.seed, time_limit=args.time_limit, target_error=args.target_error,
                            min_spp=args.min_spp, estimator=_estimator(args), features=_features(args),
                            tile_size=args.tile_size)
-    return batch.run(args.scenes, args.device, _scene_options(args), render, output)
+    scene_options = _scene_options(args)
+    if args.sweep:
+        from dataclasses import replace
+        scene_options = replace(scene_options, sweep=Path(args.sweep))
+    if args.scheduler and args.device:
+        raise VolclError("--scheduler renders on the cluster's workers, each on the device it chose (start them "
+                         "with `volcl worker ADDRESS --device ...`); --device is for renders on this machine")
+    return batch.run(args.scenes, args.device, scene_options, render, output, scheduler=args.scheduler)
+
+
+def cmd_worker(args):
+    """`volcl worker ADDRESS`: a Dask worker (distributed's own command) with volcl's preload."""
+    import os
+    try:
+        import distributed  # noqa: F401
+    except ImportError:
+        raise VolclError("volcl worker needs Dask distributed: pip install 'volcl[cluster]'") from None
+    env = dict(os.environ)
+    if args.device:
+        env["VOLCL_DEVICE"] = args.device
+    extra = list(args.dask_args)
+    # dask worker's own options before --preload: what follows a preload is the preload's
+    cmd = [sys.executable, "-m", "distributed.cli.dask_worker", args.scheduler, "--nthreads", str(args.nthreads),
+           *extra, "--preload", "volcl.cluster"]
+    os.execvpe(sys.executable, cmd, env)
 
 
 def cmd_devices(args):
@@ -212,9 +236,24 @@ def main(argv=None):
     r.add_argument("--tile-size", type=int, metavar="PIXELS",
                    help="tile size of a render on several devices (default: 8 or more tiles per device, "
                         "at most 64 pixels square)")
+    r.add_argument("--sweep", metavar="FILE",
+                   help="render each scene once per line of FILE, a set of -D values (name=value ...); "
+                        "-D name=A..B[:STEP] sweeps integers too")
+    r.add_argument("--scheduler", metavar="ADDRESS",
+                   help="render on a Dask cluster: its scheduler's address (tcp://host:8786), or local:N "
+                        "for N single-threaded worker processes on this machine")
     estimator_opts(r)
     scene_opts(r)
     r.set_defaults(func=cmd_render)
+
+    w = sub.add_parser("worker", help="a Dask worker for `volcl render --scheduler` (dask worker with volcl's preload)",
+                       epilog="Options after -- go to `dask worker` (--name, --memory-limit, ...).")
+    w.add_argument("scheduler", metavar="ADDRESS", help="the scheduler's address, e.g. tcp://10.0.0.1:8786")
+    w.add_argument("--nthreads", type=int, default=1,
+                   help="render threads; each takes one of the worker's devices in turn (default 1)")
+    w.add_argument("--device", help="the devices this worker renders on (as volcl render --device; default: "
+                                    "$VOLCL_DEVICE, else the first device whose kernels build)")
+    w.set_defaults(func=cmd_worker)
 
     c = sub.add_parser("converge", help="error against render time for each estimator choice that applies")
     c.add_argument("scene")
@@ -253,7 +292,12 @@ def main(argv=None):
     t.add_argument("-D", "--define", action="append", metavar="NAME=VALUE")
     t.set_defaults(func=cmd_test)
 
+    argv = list(sys.argv[1:] if argv is None else argv)
+    passthrough = []
+    if argv[:1] == ["worker"] and "--" in argv:     # the rest is dask worker's
+        passthrough, argv = argv[argv.index("--") + 1:], argv[:argv.index("--")]
     args = p.parse_args(argv)
+    args.dask_args = passthrough
     try:
         return args.func(args)
     except VolclError as exc:

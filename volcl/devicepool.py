@@ -199,6 +199,7 @@ class DevicePool:
         job.seconds = time.perf_counter() - t0
         job.worker = w.label
         job.out = out
+        render.tile_done(job)
 
     def _fail(self, w: _Worker, exc: BaseException):
         """Retire `w` (under the lock): its tiles' accumulators are dropped, the host has them."""

@@ -16,6 +16,7 @@ class SceneOptions:
     defines: dict = field(default_factory=dict)
     width: int | None = None
     height: int | None = None
+    sweep: Path | None = None       # a sweep file: one set of -D values a line (volcl.sweep)
 
     def __post_init__(self):
         for name in ("width", "height"):

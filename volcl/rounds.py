@@ -58,10 +58,10 @@ class WorkersFailed(VolclError):
         self.result: RenderResult | None = None
 
 
-def default_tile_size(width: int, height: int, workers: int) -> int:
-    """The largest of TILE_SIZES that cuts the image into TILES_PER_WORKER tiles per worker."""
+def default_tile_size(width: int, height: int, workers: int, per_worker: int = TILES_PER_WORKER) -> int:
+    """The largest of TILE_SIZES that cuts the image into `per_worker` tiles per worker."""
     for size in TILE_SIZES:
-        if len(tiles(width, height, size)) >= TILES_PER_WORKER * max(workers, 1):
+        if len(tiles(width, height, size)) >= per_worker * max(workers, 1):
             return size
     return TILE_SIZES[-1]
 
@@ -105,7 +105,8 @@ class TiledRender:
         self.seed = int(self.params["seed"])
         self.width, self.height = self.scene.camera.width, self.scene.camera.height
         self.slots = accumulator_slots(self.width, self.height)
-        size = tile_size or default_tile_size(self.width, self.height, executor.size)
+        size = tile_size or default_tile_size(self.width, self.height, executor.size,
+                                              getattr(executor, "tiles_per_worker", TILES_PER_WORKER))
         self.tile_list = tiles(self.width, self.height, size)
         self.round_seconds = float(round_seconds)
         shape = (self.slots, self.height, self.width)
@@ -117,6 +118,7 @@ class TiledRender:
         self.rounds = 0
         self.build_seconds = 0.0    # kernel builds the tiles waited for (summed over workers)
         self.work: dict = {}        # worker label -> pixel samples rendered (this session)
+        self.on_tile = None         # called with each TileJob as it is done (progress over tiles)
         executor.prepare(self)      # programs built, scene uploaded, before any render time counts
 
     @property
@@ -144,6 +146,11 @@ class TiledRender:
         out.update(samples_done=self.samples_done, seconds=0.0, slots=self.slots, width=self.width,
                    height=self.height, seed=self.seed, tile=(t.x, t.y, t.width, t.height))
         return out
+
+    def tile_done(self, job: TileJob):
+        """An executor's word that `job` is rendered (from any thread)."""
+        if self.on_tile is not None:
+            self.on_tile(job)
 
     def _put(self, job: TileJob):
         t = job.tile
@@ -188,6 +195,7 @@ class TiledRender:
         if total:
             result.shares = {label: n / total for label, n in self.work.items()}
         result.info["workers"] = list(self.executor.labels)
+        result.info["cluster"] = bool(getattr(self.executor, "cluster", False))
         if self.executor.failures:
             result.info["failures"] = list(self.executor.failures)
         return result
@@ -271,7 +279,11 @@ class TiledRender:
 def renderer_for(scene, devices=None, executor=None, seed=None, estimator=None, features=None,
                  tile_size=None, notify=None):
     """A Renderer on one device, or a TiledRender on several devices (`devices`, resolved by
-    volcl.device.resolve_many) or on an executor's workers (a Dask cluster)."""
+    volcl.device.resolve_many) or on an executor's workers (a Dask cluster, volcl.cluster)."""
+    if executor is not None:
+        from .cluster import CLUSTER_ROUND_SECONDS
+        return TiledRender(scene, executor, seed=seed, estimator=estimator, features=features,
+                           tile_size=tile_size, round_seconds=CLUSTER_ROUND_SECONDS)
     if executor is None:
         from . import device as devmod
         devs = devmod.resolve_many(devices)
