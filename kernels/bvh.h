@@ -8,11 +8,13 @@
 #ifndef VOLCL_BVH_H
 #define VOLCL_BVH_H
 
+#include "cylinder.h"   /* analytic cylinders (VOLCL_HAS_CYLINDERS) */
+
 #define VOLCL_BVH_STACK 64
 
 typedef struct {
     float t;
-    int prim;       /* code from prim_ids: >= 0 triangle, < 0 sphere */
+    int prim;       /* code from prim_ids: >= 0 triangle, < 0 analytic (sphere or cylinder, cylinder.h) */
     float b1, b2;   /* barycentrics of p1 and p2 on triangles */
 } Hit;
 
@@ -118,9 +120,15 @@ __attribute__((always_inline))
 inline bool prim_intersect(const SceneData *sc, int code, float3 o, float3 d, const Shear *sh, float tmax,
                            Hit *hit) {
     float t, b1 = 0.0f, b2 = 0.0f;
-#if VOLCL_HAS_SPHERES
+#if VOLCL_HAS_SPHERES || VOLCL_HAS_CYLINDERS
     if (code < 0) {
-        if (!sphere_intersect(&sc->spheres[-code - 1], o, d, tmax, &t)) return false;
+        int a = -code - 1;
+#if VOLCL_HAS_CYLINDERS
+        if (analytic_is_cylinder(a)) {
+            if (!cylinder_intersect(&sc->cylinders[a - VOLCL_CYLINDER_CODE_BASE], o, d, tmax, &t)) return false;
+        } else
+#endif
+        if (!sphere_intersect(&sc->spheres[a], o, d, tmax, &t)) return false;
     } else
 #endif
     if (!triangle_intersect(&sc->triangles[code], sh, tmax, &t, &b1, &b2)) return false;

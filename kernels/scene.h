@@ -4,10 +4,11 @@
 
 typedef struct {
     __global const BvhNode *nodes;
-    __global const int *prim_ids;       /* >= 0: triangle index; < 0: sphere index -(id + 1) */
+    __global const int *prim_ids;       /* >= 0: triangle index; < 0: analytic index -(id + 1) (cylinder.h) */
     __global const Triangle *triangles;
     __global const TriangleNormals *normals;
     __global const Sphere *spheres;
+    __global const Cylinder *cylinders;
     __global const ShapeInfo *shapes;
     __global const Bsdf *bsdfs;
     __global const Light *lights;

@@ -18,7 +18,7 @@ import signal
 import sys
 import time
 import traceback
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from . import checkpoint
@@ -38,6 +38,7 @@ class Job:
     seconds: float | None = None
     error: str = ""
     defines: dict | None = None     # this job's -D values (a sweep's set), None: the batch's
+    swept: dict = field(default_factory=dict)   # the values of `defines` that vary in the sweep
 
     @property
     def failed(self) -> bool:
@@ -46,8 +47,8 @@ class Job:
     @property
     def label(self) -> str:
         """The scene, with the swept values of this job ('fog.xml [frame=3]')."""
-        swept = getattr(self, "swept", None) or {}
-        return self.scene + (" [" + " ".join(f"{k}={v}" for k, v in swept.items()) + "]" if swept else "")
+        swept = " ".join(f"{k}={v}" for k, v in self.swept.items())
+        return self.scene + (f" [{swept}]" if swept else "")
 
 
 def make_jobs(scenes, scene_options: SceneOptions, output: OutputOptions) -> list[Job]:
@@ -68,9 +69,8 @@ def make_jobs(scenes, scene_options: SceneOptions, output: OutputOptions) -> lis
                 raise VolclError(f"{scene} with {values} and {taken[path]} would both write {path}; a sweep "
                                  "lists each set of values once")
             taken[path] = f"{scene} with {values}"
-            job = Job(str(scene), path, defines=values if names else None)
-            job.swept = {n: values[n] for n in names if n in values}
-            jobs.append(job)
+            jobs.append(Job(str(scene), path, defines=values if names else None,
+                            swept={n: values[n] for n in names if n in values}))
     return jobs
 
 
@@ -216,7 +216,11 @@ def load_scene(path, options: SceneOptions):
     """The volcl.Scene of a scene file, its warnings printed."""
     from .api import prepare
     from .scene import load
+    from .scene.model import Scene, select_sensor
     model = load(path, options.defines)
+    if options.sensor is not None and isinstance(model, Scene):
+        select_sensor(model, options.sensor)
+        model.warnings = [w for w in model.warnings if "volcl renders the first" not in w]
     return prepare(model, path, options.defines, options.width, options.height,
                    warn=lambda w: print(f"warning: {w}", file=sys.stderr))
 
@@ -238,8 +242,9 @@ def render_job(job: Job, devices, stop: StopRequest, scene_options: SceneOptions
         scene_options = replace(scene_options, defines=job.defines)
     scene = load_scene(job.scene, scene_options)
     defines = scene_options.defines
-    # --spp caps --time-limit and --target-error; without any of the three, the scene's spp applies
-    spp = render.spp or (None if render.time_limit or render.target_error else scene.spp)
+    # --spp caps --time-limit and --target-error; without it the scene's spp caps a time limit (the
+    # render stops at whichever comes first), while a target error runs until it is met
+    spp = render.spp or (None if render.target_error else scene.spp)
     estimator = render.estimator
     if not estimator.nee and any(e.kind in ("point", "directional") for e in scene.model.emitters):
         print(f"volcl: warning: {job.scene}: with --nee off, point and directional lights are never found (no "
@@ -293,7 +298,7 @@ def render_job(job: Job, devices, stop: StopRequest, scene_options: SceneOptions
             last_save = time.monotonic()
         return stop.requested
 
-    name = Path(job.scene).name + "".join(f" {k}={v}" for k, v in (getattr(job, "swept", None) or {}).items())
+    name = Path(job.scene).name + "".join(f" {k}={v}" for k, v in job.swept.items())
     progress = Progress(position + name, renderer.samples_done, spp, output.quiet)
     if hasattr(renderer, "tile_list"):
         progress.tiles_total = len(renderer.tile_list)
@@ -311,7 +316,11 @@ def render_job(job: Job, devices, stop: StopRequest, scene_options: SceneOptions
     complete = result.complete
     if interval is not None and (not complete or output.keep_checkpoint):
         checkpoint.save(ckpt, renderer, ident, extra)
-    layers = {"variance": result.variance} if out.suffix.lower() == ".exr" else None
+    layers = None
+    if out.suffix.lower() == ".exr":
+        layers = {"variance": result.variance}
+        if scene.model.integrator.moment:   # Mitsuba's moment integrator: the samples' second moment too
+            layers["m2"] = result.second_moment
     write_image(out, result.image, result.metadata, layers)
     if complete and not output.keep_checkpoint and ckpt.is_file():
         ckpt.unlink()

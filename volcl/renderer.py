@@ -354,6 +354,7 @@ def build_result(render, state: dict, tile: Tile) -> RenderResult:
     sample_var = np.maximum(ss[:, :3] / safe - mean ** 2, 0) * safe / np.maximum(safe - 1, 1)
     var_mean = sample_var / safe
     shape = (tile.height, tile.width, 3)
+    second_moment = (ss[:, :3] / safe).reshape(shape).astype(np.float32)
     packed = render.packed
     whole = tile.pixels == render.width * render.height
     info = dict(render.prepared.info, estimator=render.estimator.describe(), kernel_sha256=sources_hash(),
@@ -365,7 +366,8 @@ def build_result(render, state: dict, tile: Tile) -> RenderResult:
         build_seconds=render.build_seconds, tracking_cutoffs=int(state["cutoffs"].sum(dtype=np.uint64)),
         stats={"triangles": packed.triangle_count, "spheres": packed.sphere_count,
                "bvh_seconds": packed.bvh_seconds, "features": describe(render.features), **packed.stats},
-        seed=render.seed, tile=None if whole else tile, image_size=(render.width, render.height), info=info)
+        seed=render.seed, tile=None if whole else tile, image_size=(render.width, render.height), info=info,
+        second_moment=second_moment)
 
 
 class _ErrorCheck:
