@@ -128,6 +128,11 @@ def render(scene, spp: int | None = None, seed: int | None = None, device=None, 
     else:
         from .rounds import renderer_for
         r = renderer_for(scene, devices, seed=seed, estimator=estimator, tile_size=tile_size)
+    return _run(r, scene, spp, time_limit, target_error, progress)
+
+
+def _run(r, scene, spp, time_limit, target_error, progress) -> RenderResult:
+    """r.render with render()'s defaults and progress bar."""
     if spp is None and time_limit is None and target_error is None:
         spp = scene.spp
     callback, close = _progress(progress, scene, spp)
@@ -148,13 +153,7 @@ def _render_on_cluster(scene, scheduler, spp, seed, time_limit, target_error, pr
     executor = cluster.DaskExecutor(client)
     try:
         r = renderer_for(scene, executor=executor, seed=seed, estimator=estimator, tile_size=tile_size)
-        if spp is None and time_limit is None and target_error is None:
-            spp = scene.spp
-        callback, close = _progress(progress, scene, spp)
-        try:
-            return r.render(spp, progress=callback, time_limit=time_limit, target_error=target_error)
-        finally:
-            close()
+        return _run(r, scene, spp, time_limit, target_error, progress)
     finally:
         executor.close()
         if client is not scheduler:

@@ -68,6 +68,9 @@ def cmd_render(args):
     if args.sweep:
         from dataclasses import replace
         scene_options = replace(scene_options, sweep=Path(args.sweep))
+    if args.scheduler and args.scheduler.startswith("local:"):
+        import logging      # the cluster is this command's own: its workers' comings and goings are noise
+        logging.getLogger("distributed").setLevel(logging.WARNING)
     if args.scheduler and args.device:
         raise VolclError("--scheduler renders on the cluster's workers, each on the device it chose (start them "
                          "with `volcl worker ADDRESS --device ...`); --device is for renders on this machine")

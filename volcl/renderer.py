@@ -212,30 +212,22 @@ class Renderer:
             spp = self.scene.spp
         target = None if spp is None else self.samples_done + spp
         self.spp_requested = target or 0
-        check = None if target_error is None else _ErrorCheck(target_error, max(min_spp, 1))
+        rules = StopRules(time_limit, target_error, min_spp, stop)
         reason = "spp"
-        t_start = time.perf_counter()
         while target is None or self.samples_done < target:
             t0 = time.perf_counter()
             count = self.slots - self.samples_done % self.slots
             if target is not None:
                 count = min(count, target - self.samples_done)
-            if check is not None:
-                count = max(1, min(count, check.next_at - self.samples_done))
+            count = rules.cap(self.samples_done, count)
             self._pass(self.samples_done, count)
             self.queue.finish()
             self.samples_done += count
             self.seconds += time.perf_counter() - t0
             if progress is not None:
                 progress(count)
-            if time_limit is not None and time.perf_counter() - t_start >= time_limit:
-                reason = "time"
-                break
-            if check is not None and self.samples_done >= check.next_at and check.reached(self):
-                reason = "error"
-                break
-            if stop is not None and stop():
-                reason = "stopped"
+            reason = rules.reason(self) or reason
+            if reason != "spp":
                 break
         result = self.result()
         result.stop_reason = reason
@@ -368,6 +360,36 @@ def build_result(render, state: dict, tile: Tile) -> RenderResult:
                "bvh_seconds": packed.bvh_seconds, "features": describe(render.features), **packed.stats},
         seed=render.seed, tile=None if whole else tile, image_size=(render.width, render.height), info=info,
         second_moment=second_moment)
+
+
+class StopRules:
+    """The rules that end a progressive render besides its spp, checked between passes (on one
+    device) or rounds (volcl.rounds), in this order: time_limit seconds since the render began,
+    the image's estimated relative error at or below target_error (checked from min_spp samples
+    on, at spp counts _ErrorCheck picks), and stop() returning true."""
+
+    def __init__(self, time_limit=None, target_error=None, min_spp: int = MIN_SPP_FOR_ERROR, stop=None):
+        self.time_limit = time_limit
+        self.check = None if target_error is None else _ErrorCheck(target_error, max(min_spp, 1))
+        self.stop = stop
+        self.t_start = time.perf_counter()
+
+    def cap(self, done: int, count: int) -> int:
+        """`count` samples, or fewer so as to end at the next error check."""
+        return count if self.check is None else max(1, min(count, self.check.next_at - done))
+
+    def seconds_left(self) -> float | None:
+        return None if self.time_limit is None else self.time_limit - (time.perf_counter() - self.t_start)
+
+    def reason(self, render) -> str | None:
+        """'time', 'error' or 'stopped' when a rule is met by `render` (a Renderer or TiledRender)."""
+        if self.time_limit is not None and self.seconds_left() <= 0:
+            return "time"
+        if self.check is not None and render.samples_done >= self.check.next_at and self.check.reached(render):
+            return "error"
+        if self.stop is not None and self.stop():
+            return "stopped"
+        return None
 
 
 class _ErrorCheck:

@@ -30,7 +30,7 @@ import numpy as np
 from .errors import VolclError
 from .estimator import Estimator
 from .prepared import Scene as PreparedScene
-from .renderer import MIN_SPP_FOR_ERROR, Renderer, _ErrorCheck, build_result, data_hash, render_setup
+from .renderer import MIN_SPP_FOR_ERROR, Renderer, StopRules, build_result, data_hash, render_setup
 from .result import RenderResult
 from .scene.model import Scene as ModelScene
 from .tiles import Tile, accumulator_slots, tiles
@@ -211,12 +211,11 @@ class TiledRender:
             spp = self.scene.spp
         target = None if spp is None else self.samples_done + spp
         self.spp_requested = target or 0
-        check = None if target_error is None else _ErrorCheck(target_error, max(min_spp, 1))
+        rules = StopRules(time_limit, target_error, min_spp, stop)
         reason = "spp"
-        t_start = time.perf_counter()
         rate, last = None, 0
         while target is None or self.samples_done < target:
-            count = self._round_length(rate, last, target, check, time_limit, t_start)
+            count = self._round_length(rate, last, target, rules)
             t0 = time.perf_counter()
             self._round(count)
             seconds = time.perf_counter() - t0
@@ -226,20 +225,14 @@ class TiledRender:
             rate, last = count / max(seconds, 1e-9), count
             if progress is not None:
                 progress(count)
-            if time_limit is not None and time.perf_counter() - t_start >= time_limit:
-                reason = "time"
-                break
-            if check is not None and self.samples_done >= check.next_at and check.reached(self):
-                reason = "error"
-                break
-            if stop is not None and stop():
-                reason = "stopped"
+            reason = rules.reason(self) or reason
+            if reason != "spp":
                 break
         result = self.result()
         result.stop_reason = reason
         return result
 
-    def _round_length(self, rate, last, target, check, time_limit, t_start) -> int:
+    def _round_length(self, rate, last, target, rules) -> int:
         """Samples per pixel of the next round."""
         done = self.samples_done
         first_pass = self.slots - done % self.slots     # what one device's next pass would add
@@ -249,14 +242,12 @@ class TiledRender:
             count = max(1, min(int(rate * self.round_seconds), ROUND_GROWTH * last))
             if count >= first_pass:     # end on a whole round of slots: no partial-slot passes
                 count = first_pass + (count - first_pass) // self.slots * self.slots
-            if time_limit is not None:
-                left = time_limit - (time.perf_counter() - t_start)
+            left = rules.seconds_left()
+            if left is not None:
                 count = min(count, max(1, int(left * rate)))
         if target is not None:
             count = min(count, target - done)
-        if check is not None:
-            count = max(1, min(count, check.next_at - done))
-        return count
+        return rules.cap(done, count)
 
     def _round(self, count: int):
         """Every tile from samples_done to samples_done + count; the image changes only once all
@@ -284,11 +275,10 @@ def renderer_for(scene, devices=None, executor=None, seed=None, estimator=None, 
         from .cluster import CLUSTER_ROUND_SECONDS
         return TiledRender(scene, executor, seed=seed, estimator=estimator, features=features,
                            tile_size=tile_size, round_seconds=CLUSTER_ROUND_SECONDS)
-    if executor is None:
-        from . import device as devmod
-        devs = devmod.resolve_many(devices)
-        if len(devs) == 1 and tile_size is None:
-            return Renderer(scene, device=devs[0], features=features, seed=seed, estimator=estimator)
-        from .devicepool import DevicePool
-        executor = DevicePool(devs, notify=notify)
-    return TiledRender(scene, executor, seed=seed, estimator=estimator, features=features, tile_size=tile_size)
+    from . import device as devmod
+    devs = devmod.resolve_many(devices)
+    if len(devs) == 1 and tile_size is None:
+        return Renderer(scene, device=devs[0], features=features, seed=seed, estimator=estimator)
+    from .devicepool import DevicePool
+    return TiledRender(scene, DevicePool(devs, notify=notify), seed=seed, estimator=estimator, features=features,
+                       tile_size=tile_size)
