@@ -167,13 +167,14 @@ def _tile_renderer(scene, spec, tile, start=0):
     cache = getattr(_local, "renderers", None)
     if cache is None or cache.get("scene") != (id(scene), scene.version):
         cache = _local.renderers = {"scene": (id(scene), scene.version)}
-    r = cache.get(key)
+    # Taken out of the cache while the task runs, and put back by tile_round once it has
+    # succeeded: a task that fails mid-pass leaves accumulators no retry may start from.
+    r = cache.pop(key, None)
     if r is not None and start and r.samples_done == start:
-        return r, True
+        return r, key, True
     r = Renderer(scene, device=worker_device(), features=spec["features"], seed=spec["seed"],
                  estimator=spec["estimator"], tile=tile)
-    cache[key] = r
-    return r, False
+    return r, key, False
 
 
 def warm(scene, spec) -> str:
@@ -188,11 +189,12 @@ def tile_round(scene, spec, tile, state, count) -> dict:
     """A task: `count` more samples per pixel of `tile`, from `state` (None: from none)."""
     t0 = time.perf_counter()
     start = 0 if state is None else int(state["samples_done"])
-    r, resident = _tile_renderer(scene, spec, tile, start)
+    r, key, resident = _tile_renderer(scene, spec, tile, start)
     if state is not None and not resident:
         r.restore(state)
     r.advance(count)
     out = r.state()
+    _local.renderers[key] = r
     return {"state": out, "worker": _worker_label(r.device), "seconds": time.perf_counter() - t0}
 
 
