@@ -392,16 +392,6 @@ class StopRules:
         return None
 
 
-def _group_items(kernel, device) -> int:
-    """GROUP_ITEMS, or the largest power of two below it that the kernel runs with on `device`."""
-    limit = min(int(device.max_work_group_size),
-                int(kernel.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, device)))
-    n = GROUP_ITEMS
-    while n > limit:
-        n //= 2
-    return max(n, 1)
-
-
 class _ErrorCheck:
     """When to read the image back to test a target error. Each check predicts, from the error's
     1/sqrt(spp) fall, the spp at which the target will be met and checks next there (at least 5%
