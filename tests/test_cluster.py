@@ -173,6 +173,45 @@ def test_the_command_line_starts_a_local_cluster(tmp_path, device):
     assert r.returncode == 2 and "local:N with N >= 1" in r.stderr
 
 
+def test_ctrl_c_on_the_client_writes_what_has_arrived_and_resume_continues(tmp_path, device):
+    """SIGINT to `volcl render --scheduler local:2` mid-render: the rounds that came back are written
+    with a checkpoint (exit 130); --resume continues to the bits of an uninterrupted local render."""
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    out = tmp_path / "fog.exr"
+    args = [sys.executable, "-m", "volcl", "render", str(SCENES / "fog.xml"), "-o", str(out), "--width", "24",
+            "--height", "16", "--seed", "3"]
+    proc = subprocess.Popen([*args, "--scheduler", "local:2", "--spp", str(10 ** 7)], cwd=ROOT, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines = []
+    try:
+        for line in proc.stderr:             # the first progress line comes after the first round
+            lines.append(line)
+            if re.search(r"\d+/\d+ spp", line):
+                break
+        proc.send_signal(signal.SIGINT)
+        _, rest = proc.communicate(timeout=120)
+        lines.append(rest)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    stderr = "".join(lines)
+    assert proc.returncode == 130, stderr
+    m = re.search(r"interrupted after (\d+) spp; wrote", stderr)
+    assert m and int(m.group(1)) > 0, stderr
+    done = int(m.group(1))
+    pixels, attrs = read_image(out)
+    assert attrs["volcl:spp"] == done and attrs["volcl:complete"] == 0
+    scene = volcl.load_file(SCENES / "fog.xml", width=24, height=16)
+    assert pixels[..., :3].tobytes() == volcl.render(scene, spp=done, seed=3, device=device).image.tobytes()
+    total = done + 5
+    r = subprocess.run([*args, "--spp", str(total), "--resume", "--device", device.key, "-q"], cwd=ROOT, env=env,
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0 and f"at {done} spp" in r.stderr, r.stderr
+    pixels, attrs = read_image(out)
+    assert attrs["volcl:spp"] == total and attrs["volcl:complete"] == 1
+    assert pixels[..., :3].tobytes() == volcl.render(scene, spp=total, seed=3, device=device).image.tobytes()
+
+
 
 def test_volcl_worker_joins_a_scheduler_with_volcls_preload(client, device, tmp_path):
     """`volcl worker ADDRESS` (dask worker with volcl.cluster as its preload) joins, names its device
