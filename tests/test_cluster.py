@@ -213,6 +213,18 @@ def test_ctrl_c_on_the_client_writes_what_has_arrived_and_resume_continues(tmp_p
 
 
 
+def test_bad_scheduler_addresses_are_named(monkeypatch):
+    monkeypatch.setattr(cluster, "CONNECT_SECONDS", 1.0)
+    with pytest.raises(volcl.VolclError, match="bogus://x: not a scheduler address .*unknown address scheme"):
+        cluster.connect("bogus://x")
+    with pytest.raises(volcl.VolclError, match="tcp://127.0.0.1:1: cannot reach the Dask scheduler"):
+        cluster.connect("tcp://127.0.0.1:1")
+    with pytest.raises(volcl.VolclError, match="expected local:N with N >= 1"):
+        cluster.connect("local:two")
+    with pytest.raises(volcl.VolclError, match="expected a scheduler address"):
+        volcl.render(volcl.load_file(SCENES / "fog.xml", **SIZE), scheduler=3.5)
+
+
 def test_volcl_worker_joins_a_scheduler_with_volcls_preload(client, device, tmp_path):
     """`volcl worker ADDRESS` (dask worker with volcl.cluster as its preload) joins, names its device
     and renders its share."""

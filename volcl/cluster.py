@@ -39,6 +39,8 @@ LOCAL = "local:"
 # Times Dask runs a task again after an exception in it (a worker that dies is handled by Dask
 # itself, which moves the task; `distributed.scheduler.allowed-failures`).
 TASK_RETRIES = 2
+# How long the client tries to reach a scheduler at an address.
+CONNECT_SECONDS = 30.0
 # How long a render waits for a first worker to join a scheduler that has none.
 WORKER_WAIT_SECONDS = 60.0
 
@@ -78,7 +80,10 @@ def connect(scheduler):
         client._volcl_cluster = cluster     # closed with the client (close())
         return client
     try:
-        return distributed.Client(text, timeout=30)
+        return distributed.Client(text, timeout=CONNECT_SECONDS)
+    except ValueError as exc:       # an address Dask cannot parse (unknown scheme, no port)
+        raise VolclError(f"--scheduler {scheduler}: not a scheduler address ({exc}); expected tcp://HOST:PORT "
+                         "(dask scheduler prints it) or local:N") from None
     except OSError as exc:
         raise VolclError(f"--scheduler {scheduler}: cannot reach the Dask scheduler ({exc}); start one with "
                          "`dask scheduler` and workers with `volcl worker ADDRESS`") from None
