@@ -42,7 +42,7 @@ def _chromatic(sigma_t) -> bool:
     if isinstance(sigma_t, Volume):
         if sigma_t.kind == "const":
             return bool(np.ptp(sigma_t.value) > 0)
-        data = sigma_t.data
+        data = sigma_t.values()
         return data.shape[-1] == 3 and bool(np.any(data.max(axis=-1) != data.min(axis=-1)))
     return bool(np.ptp(np.asarray(sigma_t, dtype=float)) > 0)
 

@@ -79,12 +79,13 @@ PHASE_LOBE = np.dtype([
 ])
 
 GRID_FILTERS = {"trilinear": 0, "nearest": 1}
+GRID_LAYOUTS = {"dense": 0, "sparse": 1}
 # A grid of 1 or 3 channels filling its unit cube; voxels and majorant cells live in one float
 # buffer at offsets `data` and `majorants` (see kernels/types.h).
 GRID_VOLUME = np.dtype([
     ("to_local", np.float32, 12), ("res", np.int32, 3), ("channels", np.int32),
     ("maj_res", np.int32, 3), ("filter", np.int32),
-    ("data", np.int32), ("majorants", np.int32), ("pad0", np.int32, 2),
+    ("data", np.int32), ("majorants", np.int32), ("layout", np.int32), ("pad0", np.int32),
 ])
 
 RENDER_PARAMS = np.dtype([
