@@ -238,6 +238,20 @@ class GridPacker:
         self.descriptors.append(rec)
         return len(self.descriptors) - 1
 
+    def add_words(self, words: np.ndarray) -> int:
+        """Offset of float32 words appended to grid_data (tables the kernels read beside grids)."""
+        return self._append(words)
+
+    def blackbody_table(self) -> int:
+        """Offset of the blackbody colour table (once per scene): t_min, log(t_max / t_min), size,
+        then size rgb triples (volcl/blackbody.py)."""
+        if getattr(self, "_blackbody", None) is None:
+            from . import blackbody
+            head = np.array([blackbody.T_CUTOFF, np.log(blackbody.T_MAX / blackbody.T_CUTOFF),
+                             blackbody.TABLE_SIZE], np.float32)
+            self._blackbody = self._append(np.concatenate([head, blackbody.table().reshape(-1)]))
+        return self._blackbody
+
     def arrays(self) -> tuple[np.ndarray, np.ndarray]:
         """(descriptors, grid_data); one dummy entry each when the scene has no grids, since
         OpenCL buffers cannot be empty."""

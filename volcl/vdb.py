@@ -115,7 +115,48 @@ class SparseGrid:
     def stored_bytes(self) -> int:
         """What the device layout holds for this grid: the brick index, the stored bricks and the
         tile values (kernels/grid.h), not counting the majorant grid."""
-        return 4 * (int(np.prod(self.padded_counts())) + self.bricks.size + self.tile_values.size)
+        return 4 * (int(np.prod(self.padded_counts())) + self.bricks.size + self.tile_values.size + self.channels)
+
+
+def from_dense(values: np.ndarray, ijk=(0, 0, 0), background=0.0, index_to_world=None, name: str = "density"
+               ) -> SparseGrid:
+    """A SparseGrid of the array values (z, y, x) or (z, y, x, c) whose voxel [0, 0, 0] sits at index
+    ijk (x, y, z), cut into bricks as openvdb_helper.py cuts a file's grid (tests, benchmarks)."""
+    a = np.asarray(values, np.float32)
+    a = a[..., None] if a.ndim == 3 else a
+    c = a.shape[-1]
+    bg = np.broadcast_to(np.asarray(background, np.float32), (c,)).copy()
+    nz = np.argwhere(np.any(a != bg, axis=-1))
+    empty = SparseGrid(path="", name=name, value_type="float" if c == 1 else "vec3s", channels=c, background=bg,
+                       index_to_world=np.eye(4) if index_to_world is None else np.asarray(index_to_world, float),
+                       origin=np.zeros(3, np.int64), counts=np.zeros(3, np.int64),
+                       coords=np.zeros((0, 3), np.int64), bricks=np.zeros((0, 512, c), np.float32),
+                       tile_coords=np.zeros((0, 3), np.int64), tile_values=np.zeros((0, c), np.float32))
+    if not len(nz):
+        return empty
+    ijk = np.asarray(ijk, np.int64)
+    lo = nz.min(axis=0)[::-1] + ijk              # x, y, z index box of the values
+    hi = nz.max(axis=0)[::-1] + ijk
+    lo_b, hi_b = np.floor_divide(lo, BRICK), np.floor_divide(hi, BRICK)
+    nb = hi_b - lo_b + 1
+    box = np.empty((nb[2] * BRICK, nb[1] * BRICK, nb[0] * BRICK, c), np.float32)
+    box[...] = bg
+    o = ijk - lo_b * BRICK                         # where the array starts in the box (x, y, z)
+    src = [slice(max(0, -o[k]), min(a.shape[2 - k], box.shape[2 - k] - o[k])) for k in range(3)]
+    dst = [slice(s.start + o[k], s.stop + o[k]) for k, s in enumerate(src)]
+    box[dst[2], dst[1], dst[0]] = a[src[2], src[1], src[0]]
+    b = box.reshape(nb[2], BRICK, nb[1], BRICK, nb[0], BRICK, c).transpose(4, 2, 0, 1, 3, 5, 6)
+    b = b.reshape(nb[0], nb[1], nb[2], BRICK ** 3, c)           # [bx, by, bz]
+    uniform = np.all(b == b[:, :, :, :1], axis=(3, 4))
+    stored = np.argwhere(~uniform)
+    tiles = np.argwhere(uniform & np.any(b[:, :, :, 0] != bg, axis=-1))
+    empty.origin, empty.counts = lo_b, nb
+    empty.coords = stored
+    empty.bricks = b[~uniform].reshape(-1, BRICK ** 3, c)
+    empty.tile_coords = tiles
+    empty.tile_values = b[tiles[:, 0], tiles[:, 1], tiles[:, 2], 0].reshape(-1, c)
+    empty.active_voxels = int(np.sum(np.any(a != bg, axis=-1)))
+    return empty
 
 
 def _python() -> str:

@@ -38,6 +38,12 @@ def positive(name: str, value: float) -> float:
     return value
 
 
+def nonneg(name: str, value: float) -> float:
+    if not value >= 0:
+        raise CheckError(f"'{name}' must be >= 0, got {value}")
+    return value
+
+
 def nonneg_color(name: str, value: np.ndarray) -> np.ndarray:
     if (value < 0).any():
         raise CheckError(f"'{name}' must be >= 0, got {value.tolist()}")

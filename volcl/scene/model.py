@@ -86,6 +86,17 @@ class Medium:
     radiance: Optional[np.ndarray] = None    # volcl extension: emits sigma_a * radiance
     id: str = ""
     source: Optional[Source] = None
+    # volcl extension, heterogeneous media: a spatially varying emission, either the radiance
+    # itself ('radiance') or a temperature (volcl.blackbody) ('temperature'); times emission_scale
+    emission_kind: str = "none"               # 'none' | 'radiance' | 'temperature'
+    emission_volume: Optional[Volume] = None
+    emission_scale: float = 1.0
+    temperature_scale: float = 1.0
+    temperature_offset: float = 0.0
+
+    @property
+    def emissive(self) -> bool:
+        return self.emission_kind != "none" or (self.radiance is not None and bool(np.any(self.radiance > 0)))
 
 
 @dataclass
