@@ -86,15 +86,18 @@ def sparse_majorants(sg, scale: float) -> np.ndarray:
     largest value (over channels, times scale) among its own voxels and the voxels next to it,
     which is every voxel a trilinear or nearest lookup inside it reads. Outside the box the field
     is zero (the kernels clip rays to the box)."""
+    # scaled in float32 first, as the stored values are, so that the cells equal majorant_grid's
+    # over the same values bit for bit
+    f = np.float32(scale)
     nb = sg.padded_counts()
-    bg = float(np.max(sg.background))
+    bg = float(np.max(sg.background * f))
     regions = np.full(tuple(nb[::-1]) + (3, 3, 3), bg, np.float64)
     if len(sg.coords):
         c = sg.coords + 1
-        regions[c[:, 2], c[:, 1], c[:, 0]] = _brick_region_maxima(sg.bricks)
+        regions[c[:, 2], c[:, 1], c[:, 0]] = _brick_region_maxima(sg.bricks * f)
     if len(sg.tile_coords):
         t = sg.tile_coords + 1
-        regions[t[:, 2], t[:, 1], t[:, 0]] = sg.tile_values.max(axis=-1)[:, None, None, None]
+        regions[t[:, 2], t[:, 1], t[:, 0]] = (sg.tile_values * f).max(axis=-1)[:, None, None, None]
     padded = np.pad(regions, [(1, 1)] * 3 + [(0, 0)] * 3, constant_values=0.0)
     out = np.zeros(tuple(nb[::-1]), np.float64)
     bz, by, bx = out.shape
@@ -105,7 +108,7 @@ def sparse_majorants(sg, scale: float) -> np.ndarray:
                 part = padded[1 + oz:1 + oz + bz, 1 + oy:1 + oy + by, 1 + ox:1 + ox + bx,
                               1 - oz, 1 - oy, 1 - ox]
                 np.maximum(out, part, out=out)
-    return (out * scale * (1 + MAJORANT_MARGIN)).astype(np.float32)
+    return (out * (1 + MAJORANT_MARGIN)).astype(np.float32)
 
 
 def sparse_chunk(sg, scale: float, base: int) -> np.ndarray:
@@ -132,6 +135,20 @@ def sparse_chunk(sg, scale: float, base: int) -> np.ndarray:
                             (sg.background.astype(np.float32) * np.float32(scale)).reshape(-1),
                             (sg.tile_values.astype(np.float32) * np.float32(scale)).reshape(-1)])
     return words
+
+
+def grid_cost_text(cost: dict) -> str:
+    """One sparse grid's device cost (GridPacker.sparse) in words: bytes per active voxel, and what
+    the same box would cost dense."""
+    active = max(cost["active_voxels"], 1)
+    return (f"grid '{cost['name']}' of {cost['path'] or '(array)'}: {cost['active_voxels']} active voxels in "
+            f"{cost['stored_bricks']} bricks of 8^3, {cost['bytes']} bytes ({cost['bytes'] / active:.2f} bytes "
+            f"per active voxel; its {cost['box_voxels']}-voxel box dense would take {4 * cost['box_voxels']} bytes)")
+
+
+def grid_cost_notes(costs) -> str:
+    """What each sparse grid costs, as the end of an out-of-memory message ('' without any)."""
+    return "".join(f"; {grid_cost_text(c)}" for c in costs)
 
 
 def lookup(data: np.ndarray, filter: str, p_local: np.ndarray) -> np.ndarray:

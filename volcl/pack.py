@@ -381,7 +381,7 @@ class Packer:
         media = _pack_media(self.media, grids, phases)
         grid_desc, grid_data = grids.arrays()
         phase_lobes, phase_tables = phases.arrays()
-        self.stats.update(grid_voxels=grids.voxels, majorant_cells=grids.majorant_count,
+        self.stats.update(grid_voxels=grids.voxels, majorant_cells=grids.majorant_count, sparse_grids=grids.sparse,
                           phase_table_ratio_error=max(phases.ratio_errors, default=0.0))
         self.arrays.update(media=media, grids=grid_desc, grid_data=grid_data, phase_lobes=phase_lobes,
                            phase_tables=phase_tables)
