@@ -145,3 +145,69 @@ def test_not_a_vdb_file(tmp_path):
     truncated.write_bytes(b"\x20\x42\x44\x56" + bytes(20))
     with pytest.raises(VolclError, match="holds no grids"):
         vdb.read(str(truncated), "density")
+
+
+# --- in scenes -------------------------------------------------------------------------------------
+
+def medium_scene(folder, medium_body, kind="heterogeneous"):
+    path = folder / f"scene_{abs(hash(medium_body))}.xml"
+    path.write_text(f'''<scene version="3.0.0">
+    <medium type="{kind}" id="m">{medium_body}</medium>
+    <sensor type="perspective"><ref id="m"/><film type="hdrfilm"><integer name="width" value="4"/>
+        <integer name="height" value="4"/></film></sensor>
+</scene>''')
+    return path
+
+
+def vdb_volume_xml(name, filename, grid):
+    return (f'<volume type="volcl_vdb" name="{name}"><string name="filename" value="{filename}"/>'
+            f'<string name="grid" value="{grid}"/></volume>')
+
+
+def test_scene_reads_vdb_and_nvdb_volumes_alike(files):
+    from volcl.scene import load
+    d = files["d"]
+    a = load(medium_scene(d, vdb_volume_xml("sigma_t", "grids.vdb", "density"))).camera.medium.sigma_t
+    assert a.kind == "sparse" and a.grid_name == "density"
+    check_density(a.sparse, files)
+    if shutil.which("nanovdb_convert"):
+        b = load(medium_scene(d, vdb_volume_xml("sigma_t", "grids.nvdb", "density"))).camera.medium.sigma_t
+        np.testing.assert_array_equal(a.sparse.dense(), b.sparse.dense())
+        np.testing.assert_allclose(a.to_world, b.to_world, rtol=1e-12, atol=1e-12)
+
+
+def test_scene_errors_name_the_file_and_the_grids(files):
+    from volcl.scene import load
+    d = files["d"]
+    with pytest.raises(VolclError) as exc:
+        load(medium_scene(d, vdb_volume_xml("sigma_t", "grids.vdb", "smoke")))
+    msg = str(exc.value)
+    assert "no grid named 'smoke'" in msg and "'density' (float)" in msg and "'Cd' (vec3s)" in msg
+    assert ".xml:2: <string>" in msg, "file, line and element"
+    with pytest.raises(VolclError, match=r"'volcl_temperature' needs a float grid, but grid 'Cd' of .*grids.vdb "
+                                         r"holds vec3s values"):
+        load(medium_scene(d, vdb_volume_xml("sigma_t", "grids.vdb", "density")
+                          + vdb_volume_xml("volcl_temperature", "grids.vdb", "Cd")))
+    with pytest.raises(VolclError, match=r"'sigma_t' needs a float grid"):
+        load(medium_scene(d, vdb_volume_xml("sigma_t", "grids.vdb", "Cd")))
+
+
+def test_grid_too_large_to_read_is_refused(files, monkeypatch):
+    monkeypatch.setattr(vdb, "MAX_REGION_VOXELS", 4096)
+    vdb._read.cache_clear()
+    try:
+        with pytest.raises(VolclError, match=r"grid 'density' of .*grids.vdb spans \d+x\d+x\d+ voxels .*more "
+                                             r"than volcl reads from one grid"):
+            vdb.read(files["vdb"], "density")
+    finally:
+        vdb._read.cache_clear()
+
+
+def test_constant_temperature_in_a_homogeneous_medium(tmp_path):
+    from volcl import blackbody
+    from volcl.scene import load
+    body = ('<rgb name="sigma_t" value="1"/><rgb name="albedo" value="0.2"/>'
+            '<float name="volcl_temperature" value="1900"/><float name="volcl_temperature_offset" value="100"/>'
+            '<float name="volcl_temperature_scale" value="1.5"/><float name="volcl_emission_scale" value="4"/>')
+    m = load(medium_scene(tmp_path, body, kind="homogeneous")).camera.medium
+    np.testing.assert_allclose(m.radiance, 4 * blackbody.rgb(2700.0), rtol=1e-12)

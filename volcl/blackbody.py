@@ -24,7 +24,7 @@ T_CUTOFF = 100.0               # kelvin: at or below it, no emission (pbrt-v4)
 # The table spans log T from T_CUTOFF to T_MAX in TABLE_SIZE knots; hotter clamps to T_MAX, where
 # the normalized colour has long stopped changing (it tends to the Rayleigh-Jeans limit's).
 T_MAX = 1.0e6
-TABLE_SIZE = 1024
+TABLE_SIZE = 4096
 
 
 def normalized_spectrum(wavelength_nm: np.ndarray, temperature: float) -> np.ndarray:
@@ -38,15 +38,27 @@ def rgb(temperature: float) -> np.ndarray:
     """Linear sRGB of the normalized blackbody at `temperature` (0 at or below the cut-off)."""
     if not temperature > T_CUTOFF:
         return np.zeros(3)
+    return _rgb_many(np.array([float(temperature)]))[0]
+
+
+def _rgb_many(temperatures: np.ndarray) -> np.ndarray:
+    """rgb() of many temperatures at once (the same sum, as one matrix product)."""
+    grid, cmfs, _ = spectra._tables()
     w = spectra._sum_points()
-    return np.maximum(spectra.to_srgb(w, normalized_spectrum(w, temperature), d65=False), 0.0)
+    xyz_bar = np.stack([np.interp(w, grid, cmfs[:, i]) for i in range(3)], axis=1)
+    with np.errstate(over="ignore"):
+        v = np.stack([normalized_spectrum(w, t) for t in temperatures])
+    xyz = v @ xyz_bar * (spectra.CIE_MAX - spectra.CIE_MIN) * spectra.Y_NORMALIZATION / spectra.STEPS
+    return np.maximum(xyz @ spectra.XYZ_TO_SRGB.T, 0.0)
 
 
 @lru_cache(maxsize=1)
 def table() -> np.ndarray:
-    """(TABLE_SIZE, 3) float32: the colour at T = T_CUTOFF * (T_MAX / T_CUTOFF) ** (i / (TABLE_SIZE - 1))."""
+    """(TABLE_SIZE, 3) float32: the colour at T = T_CUTOFF * (T_MAX / T_CUTOFF) ** (i / (TABLE_SIZE - 1)).
+    Linear interpolation of it is within 1e-3 of the colour (relative to its largest channel) above
+    500 K, and within 4e-6 absolutely everywhere (tests/test_temperature.py)."""
     temps = T_CUTOFF * (T_MAX / T_CUTOFF) ** (np.arange(TABLE_SIZE) / (TABLE_SIZE - 1))
-    out = np.array([rgb(t * (1 + 1e-12)) for t in temps], np.float64)
+    out = _rgb_many(temps)
     out[0] = 0.0            # the cut-off itself emits nothing
     return out.astype(np.float32)
 
