@@ -170,7 +170,7 @@ def test_memory_check_counts_the_bricks_and_names_their_cost():
     a = puff(n)
     sg = vdb.from_dense(a, ijk=(0, 0, 0))
     far = vdb.from_dense(a[:8, :8, :8] + 0.5, ijk=(480, 480, 480))      # a second puff far away
-    sg = _merge(sg, far)
+    sg = vdb.merge_bricks([sg, far])
     nb = sg.padded_counts()
     dense_bytes = 4 * int(np.prod(nb)) * 512
     sc = lit_ball(sparse_volume(sg, np.diag([0.004, 0.004, 0.004, 1.0]) @ tf.translate([-250, -250, -250])), 1)
@@ -182,17 +182,3 @@ def test_memory_check_counts_the_bricks_and_names_their_cost():
     assert "too large for device" in message
     assert f"grid 'density' of (array): {sg.active_voxels} active voxels in {len(sg.coords)} bricks" in message
     assert f"dense would take {dense_bytes} bytes" in message
-
-
-def _merge(a, b):
-    """Two SparseGrids of the same channels in one (bricks of b shifted into a's frame)."""
-    origin = np.minimum(a.origin, b.origin)
-    hi = np.maximum(a.origin + a.counts, b.origin + b.counts)
-    out = vdb.from_dense(np.zeros((1, 1, 1), np.float32))
-    out.origin, out.counts = origin, hi - origin
-    out.coords = np.concatenate([a.coords + a.origin - origin, b.coords + b.origin - origin])
-    out.bricks = np.concatenate([a.bricks, b.bricks])
-    out.tile_coords = np.concatenate([a.tile_coords + a.origin - origin, b.tile_coords + b.origin - origin])
-    out.tile_values = np.concatenate([a.tile_values, b.tile_values])
-    out.active_voxels = a.active_voxels + b.active_voxels
-    return out

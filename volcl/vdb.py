@@ -159,6 +159,24 @@ def from_dense(values: np.ndarray, ijk=(0, 0, 0), background=0.0, index_to_world
     return empty
 
 
+def merge_bricks(parts: list[SparseGrid]) -> SparseGrid:
+    """One SparseGrid holding the bricks of `parts` (same channels and background, no brick in two
+    of them), in the index space they share (benchmarks, tests: grids spread over a large box)."""
+    origin = np.min([p.origin for p in parts], axis=0)
+    hi = np.max([p.origin + p.counts for p in parts], axis=0)
+    out = from_dense(np.zeros((1, 1, 1, parts[0].channels), np.float32), background=parts[0].background,
+                     name=parts[0].name)
+    out.origin, out.counts = origin, hi - origin
+    out.coords = np.concatenate([p.coords + p.origin - origin for p in parts])
+    out.bricks = np.concatenate([p.bricks for p in parts])
+    out.tile_coords = np.concatenate([p.tile_coords + p.origin - origin for p in parts])
+    out.tile_values = np.concatenate([p.tile_values for p in parts])
+    out.active_voxels = sum(p.active_voxels for p in parts)
+    if len(np.unique(out.coords, axis=0)) != len(out.coords):
+        raise ValueError("merge_bricks: two parts hold the same brick")
+    return out
+
+
 def _python() -> str:
     return os.environ.get("VOLCL_OPENVDB_PYTHON", "/usr/bin/python3")
 
