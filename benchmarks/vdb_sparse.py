@@ -93,7 +93,7 @@ def main(argv=None):
             v["best"] = min(v["best"], time.perf_counter() - t0)
     samples = args.width * args.width * args.spp
     print(f"# {args.size}^3-bounded sparse cloud: {sg.active_voxels} active voxels "
-          f"({sg.active_voxels / np.prod(n):.2%} of the {n[0]}^3 padded box), {len(sg.coords)} stored bricks; "
+          f"({sg.active_voxels / np.prod(n):.2%} of the {n[0]}x{n[1]}x{n[2]} padded box), {len(sg.coords)} stored bricks; "
           f"{args.width}x{args.width} at {args.spp} spp, best of {args.repeat}; {cpu_model()}")
     print(f"{'layout':8} {'grid_data MiB':>13} {'B/active voxel':>15} {'pack s':>7} {'render s':>9} {'M samples/s':>12}")
     for name, v in variants.items():

@@ -162,3 +162,22 @@ def test_temperature_grid_from_vdb_in_equilibrium(device, tmp_path):
     r = render(load(tmp_path / "fire.xml"), spp=256, device=device)
     assert r.tracking_cutoffs == 0
     assert_mean_matches(r, le, what="temperature grid in equilibrium")
+
+
+def test_radiance_grid_with_emission_scale_in_equilibrium(device):
+    """volcl_radiance as an rgb grid (uniform Le / 2, times volcl_emission_scale 2) in a scattering
+    medium whose density varies, inside black walls emitting Le: L = Le."""
+    from scenebuild import furnace
+    le = np.array([0.6, 0.9, 0.3])
+    rng = np.random.default_rng(4)
+    density = vdb.from_dense((rng.random((9, 10, 11)) * 4).astype(np.float32), ijk=(-3, 2, -7))
+    sigma_t = Volume("sparse", value=rgb(0.0), to_world=tf.translate([-1.2] * 3) @ tf.scale([2.4] * 3),
+                     sparse=density, grid_name="density")
+    med = hetero_medium(sigma_t, 0.6, g=0.4)
+    med.emission_kind = "radiance"
+    med.emission_volume = grid(np.broadcast_to((le / 2).astype(np.float32), (3, 2, 4, 3)),
+                               tf.rotate([1, 0, 0], 20) @ tf.translate([-1] * 3) @ tf.scale([2] * 3))
+    med.emission_scale = 2.0
+    r = render(furnace(0.0, radiance=le, medium=med), spp=256, device=device)
+    assert r.tracking_cutoffs == 0
+    assert_mean_matches(r, le, what="radiance grid in equilibrium")
