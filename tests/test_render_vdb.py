@@ -182,3 +182,15 @@ def test_memory_check_counts_the_bricks_and_names_their_cost():
     assert "too large for device" in message
     assert f"grid 'density' of (array): {sg.active_voxels} active voxels in {len(sg.coords)} bricks" in message
     assert f"dense would take {dense_bytes} bytes" in message
+
+
+@needs_openvdb
+def test_fire_scene_reports_its_grids():
+    """scenes/vdb_fire.xml loads, and `volcl info` names both sparse grids and what each costs (the
+    renders are in test_temperature.py; a kernel build of this scene's features would only add time)."""
+    from test_cli import volcl
+    r = volcl("info", "scenes/vdb_fire.xml", "--no-build")
+    assert r.returncode == 0, r.stderr
+    assert "sparse grid 'density'" in r.stdout and "VOLCL_HAS_SPARSE_GRIDS=1" in r.stdout
+    for name in ("density", "temperature"):
+        assert f"sparse     grid '{name}' of " in r.stdout and "bytes per active voxel" in r.stdout
