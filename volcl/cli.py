@@ -122,6 +122,11 @@ def cmd_devices(args):
 
 
 def _grid_text(volume):
+    if volume.kind == "sparse":
+        x, y, z = volume.sparse.padded_counts() * 8
+        c = volume.sparse.channels
+        return (f"sparse grid '{volume.grid_name}', {x}x{y}x{z} box in bricks of 8^3, "
+                f"{c} channel{'s' if c > 1 else ''}, {volume.filter}")
     if volume.kind != "grid":
         return "constant extinction"
     z, y, x, c = volume.data.shape
@@ -144,6 +149,9 @@ def cmd_info(args):
     print(f"emitters   {len(kinds)}" + (f" ({', '.join(kinds)})" if kinds else ""))
     media_kinds = [m.kind + (f" ({_grid_text(m.sigma_t)})" if m.kind == "heterogeneous" else "") for m in scene.media]
     print(f"media      {len(scene.media)}" + (f": {', '.join(media_kinds)}" if media_kinds else ""))
+    from .grids import grid_cost_text
+    for cost in packed.stats.get("sparse_grids", ()):
+        print(f"sparse     {grid_cost_text(cost)}")
     print(f"features   {describe(feats)}")
     print("flags      " + " ".join(f"VOLCL_HAS_{n}={int(feats[n])}" for n in FLAGS))
     if not args.no_build:

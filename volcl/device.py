@@ -305,11 +305,12 @@ def _size(n: int) -> str:
     return f"{n / 2**20:.1f} MiB" if n < 2**30 else f"{n / 2**30:.2f} GiB"
 
 
-def check_fits(info: Device, buffers: dict[str, int], accumulator_bytes: int = 0) -> None:
+def check_fits(info: Device, buffers: dict[str, int], accumulator_bytes: int = 0, notes: str = "") -> None:
     """Raise VolclError when a scene's buffers (name -> bytes) cannot live on the device: one of them
     above its largest single allocation, or all of them (with the image accumulators) above its
     global memory. Checked before anything is uploaded, so the user gets the numbers instead of a
-    driver's out-of-resources error (or a crash) halfway through."""
+    driver's out-of-resources error (or a crash) halfway through. `notes` (what the largest parts
+    cost, e.g. sparse grids' bytes per active voxel) ends the message."""
     dev = info.device
     max_alloc, global_mem = int(dev.max_mem_alloc_size), int(dev.global_mem_size)
     name, biggest = max(buffers.items(), key=lambda item: item[1])
@@ -317,10 +318,10 @@ def check_fits(info: Device, buffers: dict[str, int], accumulator_bytes: int = 0
         raise VolclError(f"the scene is too large for device {info.key} {info.name}: its {name} buffer "
                          f"needs {_size(biggest)} ({biggest} bytes), but the device allocates at most "
                          f"{_size(max_alloc)} ({max_alloc} bytes) in one buffer; simplify the scene "
-                         f"(fewer triangles) or choose a device with more memory (--device)")
+                         f"(fewer triangles) or choose a device with more memory (--device)" + notes)
     total = sum(buffers.values()) + accumulator_bytes
     if total > global_mem:
         raise VolclError(f"the scene is too large for device {info.key} {info.name}: its buffers and "
                          f"image accumulators need {_size(total)} ({total} bytes), but the device has "
                          f"{_size(global_mem)} ({global_mem} bytes) of global memory; simplify the scene "
-                         f"or lower the resolution, or choose a device with more memory (--device)")
+                         f"or lower the resolution, or choose a device with more memory (--device)" + notes)

@@ -27,6 +27,7 @@ from . import device as devmod
 from .errors import VolclError
 from .estimator import Estimator
 from .features import describe
+from .grids import grid_cost_notes
 from .opencl import cl
 from .pack import ARG_ORDER
 from .prepared import Scene as PreparedScene
@@ -89,7 +90,8 @@ class Renderer:
         self.slots = int(slots) if slots else accumulator_slots(self.width, self.height)
         # a scene too large for the device is the user's to fix: say so before uploading anything
         devmod.check_fits(self.device, scene.buffer_sizes(),
-                          accumulator_bytes=ACCUMULATOR_BYTES * max(self.slots * self.npix, MIN_ITEMS))
+                          accumulator_bytes=ACCUMULATOR_BYTES * max(self.slots * self.npix, MIN_ITEMS),
+                          notes=grid_cost_notes(packed.stats.get("sparse_grids", ())))
         self.uploaded = scene.upload(self.device)
         self._get_program()
         ctx = self.device.ctx
