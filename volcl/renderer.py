@@ -91,7 +91,7 @@ class Renderer:
         # a scene too large for the device is the user's to fix: say so before uploading anything
         devmod.check_fits(self.device, scene.buffer_sizes(),
                           accumulator_bytes=ACCUMULATOR_BYTES * max(self.slots * self.npix, MIN_ITEMS),
-                          notes=grid_cost_notes(packed.stats.get("sparse_grids", ())))
+                          notes=grid_cost_notes(scene.packed.stats.get("sparse_grids", ())))
         self.uploaded = scene.upload(self.device)
         self._get_program()
         ctx = self.device.ctx
