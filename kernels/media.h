@@ -130,7 +130,7 @@ inline float3 blackbody_rgb(__global const float *data, int at, float t) {
     float x = fmin(log(t / tab[0]) / tab[1] * (n - 1.0f), n - 1.0f);
     int i = min((int)x, (int)n - 2);
     float w = x - (float)i;
-    return mix(vload3(i, tab + 3), vload3(i + 1, tab + 3), w);
+    return mix(vload3((size_t)i, tab + 3), vload3((size_t)i + 1, tab + 3), w);   /* i >= 0: t > t_min */
 }
 
 /* The radiance Le(p) of a heterogeneous medium (it emits sigma_a(p) Le(p) per unit length). */
