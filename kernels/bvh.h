@@ -8,7 +8,20 @@
 #ifndef VOLCL_BVH_H
 #define VOLCL_BVH_H
 
-#define VOLCL_BVH_STACK 64
+/* Deepest stack a traversal can reach; volcl/bvh_wide.py STACK builds trees within it. */
+#define VOLCL_BVH_STACK 128
+
+#if VOLCL_BVH_WIDTH == 8
+typedef float8 floatW;
+#define vloadW vload8
+#define vstoreW vstore8
+#elif VOLCL_BVH_WIDTH == 4
+typedef float4 floatW;
+#define vloadW vload4
+#define vstoreW vstore4
+#else
+#error "VOLCL_BVH_WIDTH must be 4 or 8"
+#endif
 
 typedef struct {
     float t;
@@ -96,24 +109,6 @@ inline bool sphere_intersect(__global const Sphere *sp, float3 o, float3 d, floa
     return true;
 }
 
-/* Entry distance of the ray into a node's box, or INF when it misses within [0, tmax]. The exit
- * distance is widened by a few ulps so rounding never culls a box the ray grazes. inv_d is finite
- * (see bvh_trace), so no slab product is NaN and plain compares can replace fmin/fmax, whose NaN
- * rules cost extra instructions on every node. */
-__attribute__((always_inline))
-inline float node_entry(__global const BvhNode *n, float3 o, float3 inv_d, float tmax) {
-    float3 t0 = (vload_f3(n->bmin) - o) * inv_d;
-    float3 t1 = (vload_f3(n->bmax) - o) * inv_d;
-    float3 lo = select(t1, t0, t0 < t1), hi = select(t0, t1, t0 < t1);
-    float enter = lo.x > lo.y ? lo.x : lo.y;
-    enter = enter > lo.z ? enter : lo.z;
-    enter = enter > 0.0f ? enter : 0.0f;
-    float leave = hi.x < hi.y ? hi.x : hi.y;
-    leave = leave < hi.z ? leave : hi.z;
-    leave = (leave < tmax ? leave : tmax) * 1.0000004f;
-    return enter <= leave ? enter : VOLCL_INF;
-}
-
 __attribute__((always_inline))
 inline bool prim_intersect(const SceneData *sc, int code, float3 o, float3 d, const Shear *sh, float tmax,
                            Hit *hit) {
@@ -131,44 +126,108 @@ inline bool prim_intersect(const SceneData *sc, int code, float3 o, float3 d, co
     return true;
 }
 
-/* Closest hit in (0, tmax). any_hit: return at the first hit found (shadow rays). An empty scene is
- * uploaded as one leaf with an inverted box, which no ray enters. */
+/* Per-ray constants of the box tests: origin and reciprocal direction splatted over the child
+ * lanes, and for each axis the bounds row (offset in floats) of the slab plane a ray meets first. */
+typedef struct {
+    floatW ox, oy, oz, ix, iy, iz;
+    int near_x, near_y, near_z;
+} BoxRay;
+
+inline BoxRay box_ray_make(float3 o, float3 inv_d) {
+    BoxRay r;
+    r.ox = (floatW)(o.x);
+    r.oy = (floatW)(o.y);
+    r.oz = (floatW)(o.z);
+    r.ix = (floatW)(inv_d.x);
+    r.iy = (floatW)(inv_d.y);
+    r.iz = (floatW)(inv_d.z);
+    /* rows 0-2 hold the minima, 3-5 the maxima: a negative direction meets the maximum first */
+    r.near_x = (inv_d.x < 0.0f ? 3 : 0) * VOLCL_BVH_WIDTH;
+    r.near_y = (inv_d.y < 0.0f ? 4 : 1) * VOLCL_BVH_WIDTH;
+    r.near_z = (inv_d.z < 0.0f ? 5 : 2) * VOLCL_BVH_WIDTH;
+    return r;
+}
+
+/* Entry distances of the ray into the boxes of all children of node n, INF where it misses a box
+ * within [0, tmax]. The slab distances are (bound - o) * inv_d, so the exit distance is exact up to
+ * one rounding and widening it by a few ulps means rounding never culls a box the ray grazes.
+ * inv_d is finite (see bvh_trace), so no product is NaN and plain compares replace fmin/fmax, whose
+ * NaN rules cost extra instructions on every node; the inverted boxes of unused slots give
+ * enter = +inf > leave = -inf. */
+__attribute__((always_inline))
+inline floatW node_children_entry(__global const BvhWideNode *n, const BoxRay *r, float tmax) {
+    __global const float *b = &n->bounds[0][0];
+    floatW nx = (vloadW(0, b + r->near_x) - r->ox) * r->ix;
+    floatW ny = (vloadW(0, b + r->near_y) - r->oy) * r->iy;
+    floatW nz = (vloadW(0, b + r->near_z) - r->oz) * r->iz;
+    floatW fx = (vloadW(0, b + (3 * VOLCL_BVH_WIDTH - r->near_x)) - r->ox) * r->ix;
+    floatW fy = (vloadW(0, b + (5 * VOLCL_BVH_WIDTH - r->near_y)) - r->oy) * r->iy;
+    floatW fz = (vloadW(0, b + (7 * VOLCL_BVH_WIDTH - r->near_z)) - r->oz) * r->iz;
+    floatW enter = select(ny, nx, nx > ny);
+    enter = select(nz, enter, enter > nz);
+    enter = select((floatW)(0.0f), enter, enter > (floatW)(0.0f));
+    floatW leave = select(fy, fx, fx < fy);
+    leave = select(fz, leave, leave < fz);
+    leave = select((floatW)(tmax), leave, leave < (floatW)(tmax)) * 1.0000004f;
+    return select((floatW)(VOLCL_INF), enter, enter <= leave);
+}
+
+/* Closest hit in (0, tmax). any_hit: return at the first hit found (shadow rays).
+ *
+ * The traversal keeps a stack of (child, entry distance). At a node every child box the ray enters
+ * goes on the stack; for closest hits they are inserted in order of entry distance, nearest on top,
+ * so the nearest is visited next and a hit found there culls the others when they come off the
+ * stack (an entry distance beyond the hit, with the box test's tolerance). Shadow rays skip the
+ * ordering. The builder bounds the stack depth any ray can reach by VOLCL_BVH_STACK
+ * (volcl/bvh_wide.py). An empty scene is one node without children, which no ray enters. */
 inline bool bvh_trace(const SceneData *sc, float3 o, float3 d, float tmax, bool any_hit, Hit *hit) {
     Shear sh = shear_make(o, d);
     /* a zero direction component becomes a tiny one of the same sign: its slab then spans
      * +-1e30 instead of producing 0 * INF = NaN for an origin on the slab plane */
     float3 inv_d = 1.0f / select(d, copysign((float3)(1e-30f), d), fabs(d) < (float3)(1e-30f));
+    BoxRay br = box_ray_make(o, inv_d);
     int stack[VOLCL_BVH_STACK];
-    int top = 0;
-    int node = 0;
+    float stack_t[VOLCL_BVH_STACK];
+    int top = 1;
+    stack[0] = 0;
+    stack_t[0] = 0.0f;
     bool found = false;
     hit->t = tmax;
-    if (node_entry(&sc->nodes[0], o, inv_d, tmax) == VOLCL_INF) return false;
-    for (;;) {
-        __global const BvhNode *n = &sc->nodes[node];
-        if (n->count > 0) {
-            for (int i = n->index; i < n->index + n->count; ++i) {
+    hit->prim = 0;
+    hit->b1 = hit->b2 = 0.0f;
+    while (top > 0) {
+        --top;
+        int ref = stack[top];
+        if (stack_t[top] > hit->t * 1.0000004f) continue;
+        if (ref >= 0) {
+            __global const BvhWideNode *n = &sc->nodes[ref];
+            float enter[VOLCL_BVH_WIDTH];
+            vstoreW(node_children_entry(n, &br, hit->t), 0, enter);
+            int base = top;
+            for (int i = 0; i < VOLCL_BVH_WIDTH; ++i) {
+                float t = enter[i];
+                if (t == VOLCL_INF) continue;
+                int j = top++;
+                if (!any_hit) {
+                    /* insertion into this node's run of the stack, farthest at the bottom */
+                    for (; j > base && stack_t[j - 1] < t; --j) {
+                        stack[j] = stack[j - 1];
+                        stack_t[j] = stack_t[j - 1];
+                    }
+                }
+                stack[j] = n->child[i];
+                stack_t[j] = t;
+            }
+        } else {
+            int leaf = ~ref;
+            int first = leaf >> 4, end = first + (leaf & 15) + 1;
+            for (int i = first; i < end; ++i) {
                 if (prim_intersect(sc, sc->prim_ids[i], o, d, &sh, hit->t, hit)) {
                     found = true;
                     if (any_hit) return true;
                 }
             }
-        } else {
-            int left = node + 1, right = n->index;
-            float tl = node_entry(&sc->nodes[left], o, inv_d, hit->t);
-            float tr = node_entry(&sc->nodes[right], o, inv_d, hit->t);
-            if (tl != VOLCL_INF || tr != VOLCL_INF) {
-                if (tl == VOLCL_INF) { node = right; continue; }
-                if (tr == VOLCL_INF) { node = left; continue; }
-                /* visit the nearer child first; the farther waits on the stack */
-                if (tr < tl) { int tmp = left; left = right; right = tmp; }
-                stack[top++] = right;
-                node = left;
-                continue;
-            }
         }
-        if (top == 0) break;
-        node = stack[--top];
     }
     return found;
 }

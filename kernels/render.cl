@@ -22,7 +22,7 @@
 #include "camera.h"
 #include "integrator.h"
 
-__kernel void render_pass(__global const BvhNode *nodes, __global const int *prim_ids,
+__kernel void render_pass(__global const BvhWideNode *nodes, __global const int *prim_ids,
                           __global const Triangle *triangles, __global const TriangleNormals *normals,
                           __global const Sphere *spheres, __global const ShapeInfo *shapes,
                           __global const Bsdf *bsdfs, __global const Light *lights,

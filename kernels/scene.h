@@ -3,7 +3,7 @@
 #define VOLCL_SCENE_H
 
 typedef struct {
-    __global const BvhNode *nodes;
+    __global const BvhWideNode *nodes;
     __global const int *prim_ids;       /* >= 0: triangle index; < 0: sphere index -(id + 1) */
     __global const Triangle *triangles;
     __global const TriangleNormals *normals;

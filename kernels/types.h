@@ -7,14 +7,16 @@
 #ifndef VOLCL_TYPES_H
 #define VOLCL_TYPES_H
 
-/* Flattened BVH node in depth-first order. Interior (count == 0): the left child is the next node and
- * `index` is the right child. Leaf (count > 0): primitive slots [index, index + count) of prim_ids. */
+/* Wide BVH node (volcl/bvh_wide.py): the boxes of up to VOLCL_BVH_WIDTH children as six rows
+ * (min x, y, z, then max x, y, z) of one float per child, so one vector load reads a slab plane of
+ * every child. child[i] >= 0: a node index; < 0: a leaf, ~child[i] = (first << 4) | (count - 1)
+ * over primitive slots [first, first + count) of prim_ids. Unused slots have an inverted box
+ * (min +inf, max -inf), which no ray enters. The root is node 0. */
+#define VOLCL_BVH_WIDTH 8
 typedef struct {
-    float bmin[3];
-    int index;
-    float bmax[3];
-    int count;
-} BvhNode;
+    float bounds[6][VOLCL_BVH_WIDTH];
+    int child[VOLCL_BVH_WIDTH];
+} BvhWideNode;
 
 /* A triangle as its three vertices: the watertight test needs the exact shared vertices (a vertex
  * rebuilt as p0 + edge rounds differently in each triangle that shares it, and rays leak between). */

@@ -5,7 +5,7 @@ import pytest
 
 from conftest import run_kernel
 from volcl import layout
-from volcl.bvh import build_bvh
+from volcl.bvh_wide import build_wide
 
 
 def random_scene(rng, n_tri=3000, n_sph=40):
@@ -29,7 +29,7 @@ def upload_arrays(tris, sph_c, sph_r):
     lo = np.concatenate([tris.min(1), sph_c - sph_r[:, None]])
     hi = np.concatenate([tris.max(1), sph_c + sph_r[:, None]])
     codes = np.concatenate([np.arange(len(tris)), -1 - np.arange(len(sph_c))]).astype(np.int32)
-    nodes, order = build_bvh(lo, hi)
+    nodes, order = build_wide(lo, hi)
     return nodes, codes[order], t, s
 
 

@@ -8,13 +8,26 @@ import numpy as np
 
 f3 = (np.float32, 3)
 
-# Flattened BVH node, depth-first order. Interior (count == 0): left child is the next node,
+# Binary BVH node of the host-side builder (volcl.bvh), depth-first order; the device gets the
+# wide nodes below, collapsed from these. Interior (count == 0): left child is the next node,
 # `index` is the right child. Leaf (count > 0): primitives [index, index + count) of the
 # BVH-ordered primitive list.
 BVH_NODE = np.dtype([
     ("bmin", *f3), ("index", np.int32),
     ("bmax", *f3), ("count", np.int32),
 ])
+
+# The device's wide BVH node (kernels/types.h BvhWideNode; built by volcl.bvh_wide): the boxes of
+# up to BVH_WIDTH children as six rows (min x, y, z, max x, y, z) of BVH_WIDTH floats, so one
+# vector load fetches a slab plane of every child, then the child references.
+BVH_WIDTH = 8
+
+
+def bvh_wide_node(width=BVH_WIDTH):
+    return np.dtype([("bounds", np.float32, (6, width)), ("child", np.int32, width)])
+
+
+BVH_WIDE_NODE = bvh_wide_node()
 
 TRIANGLE = np.dtype([
     ("p0", *f3), ("shape", np.int32),
@@ -83,7 +96,7 @@ RENDER_PARAMS = np.dtype([
 
 # name in kernels/types.h -> dtype, for the layout probe
 SHARED_STRUCTS = {
-    "BvhNode": BVH_NODE, "Triangle": TRIANGLE, "TriangleNormals": TRIANGLE_NORMALS, "Sphere": SPHERE,
+    "BvhWideNode": BVH_WIDE_NODE, "Triangle": TRIANGLE, "TriangleNormals": TRIANGLE_NORMALS, "Sphere": SPHERE,
     "ShapeInfo": SHAPE_INFO, "Bsdf": BSDF, "Light": LIGHT, "Medium": MEDIUM, "GridVolume": GRID_VOLUME,
     "RenderParams": RENDER_PARAMS,
 }

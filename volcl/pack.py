@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import layout
-from .bvh import build_bvh
+from .bvh_wide import build_wide, empty_wide
 from .features import detect
 from .grids import GridPacker
 from .mesh import triangle_areas32
@@ -257,12 +257,11 @@ def pack(scene: Scene, features: dict | None = None, max_leaf: int = 4, majorant
     codes = np.concatenate(codes)
     t0 = time.perf_counter()
     if len(codes):
-        nodes, order = build_bvh(np.concatenate(lo), np.concatenate(hi), max_leaf=max_leaf)
+        nodes, order = build_wide(np.concatenate(lo), np.concatenate(hi), max_leaf=max_leaf)
         prim_ids = codes[order].astype(np.int32)
         bounds_lo, bounds_hi = np.concatenate(lo).min(0), np.concatenate(hi).max(0)
     else:
-        nodes = np.zeros(1, layout.BVH_NODE)
-        nodes["bmin"], nodes["bmax"], nodes["count"] = np.inf, -np.inf, 1
+        nodes = empty_wide()
         prim_ids = np.zeros(1, np.int32)
         bounds_lo = bounds_hi = np.zeros(3)
     bvh_seconds = time.perf_counter() - t0

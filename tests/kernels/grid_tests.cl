@@ -16,7 +16,7 @@
 #include "integrator.h"
 
 #define SCENE_ARGS                                                                                      \
-    __global const BvhNode *nodes, __global const int *prim_ids, __global const Triangle *triangles,   \
+    __global const BvhWideNode *nodes, __global const int *prim_ids, __global const Triangle *triangles,   \
     __global const TriangleNormals *normals, __global const Sphere *spheres,                            \
     __global const ShapeInfo *shapes, __global const Bsdf *bsdfs, __global const Light *lights,         \
     __global const float *light_tri_cdf, __global const int *light_tris, __global const Medium *media,  \
