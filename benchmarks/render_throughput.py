@@ -179,7 +179,7 @@ def memory_row(label, renderer):
     total = sum(sizes.values())
     per = lambda *names: f"{sum(sizes[n] for n in names) / max(ntri, 1):.1f}"   # noqa: E731
     return [label, f"{ntri:,}", renderer.packed.sphere_count, f"{total / 2**20:.2f}",
-            f"{total / max(ntri, 1):.1f}", per("nodes", "prim_ids"), per("triangles", "normals"),
+            f"{total / max(ntri, 1):.1f}", per("nodes", "leaves"), per("triangles", "normals"),
             f"{renderer.packed.bvh_seconds:.2f}"]
 
 
@@ -295,7 +295,7 @@ def main(argv=None):
         mrows.append(memory_row(f"synthetic mesh ({args.mesh_triangles:,} requested)", Renderer(mesh, device=device)))
     print("## Device memory of the scene buffers (volcl)\n")
     print(table(["scene", "triangles", "spheres", "total MiB", "bytes/triangle",
-                 "BVH (nodes + prim ids) bytes/tri", "triangles + normals bytes/tri", "BVH build s"], mrows))
+                 "BVH (nodes + leaf packets) bytes/tri", "triangles + normals bytes/tri", "BVH build s"], mrows))
     print(f"\nload average at end: {load_average()}")
     return 0
 

@@ -144,7 +144,7 @@ class Volcl:
         self.program = build_program(self.ctx, feats, KERNEL)
         mf = cl.mem_flags
         self.scene_bufs = [cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(a[k]))
-                           for k in ("nodes", "prim_ids", "triangles", "spheres")]
+                           for k in ("nodes", "leaves", "triangles", "spheres")]
         self.closest = cl.Kernel(self.program, "trace_closest")
         self.any = cl.Kernel(self.program, "trace_any")
 

@@ -13,19 +13,35 @@
 
 #if VOLCL_BVH_WIDTH == 8
 typedef float8 floatW;
+typedef int8 intW;
 #define vloadW vload8
 #define vstoreW vstore8
 #elif VOLCL_BVH_WIDTH == 4
 typedef float4 floatW;
+typedef int4 intW;
 #define vloadW vload4
 #define vstoreW vstore4
 #else
 #error "VOLCL_BVH_WIDTH must be 4 or 8"
 #endif
 
+#if VOLCL_LEAF_WIDTH == 4
+typedef float4 floatL;
+typedef int4 intL;
+#define vloadL vload4
+#define vstoreL vstore4
+#elif VOLCL_LEAF_WIDTH == 8
+typedef float8 floatL;
+typedef int8 intL;
+#define vloadL vload8
+#define vstoreL vstore8
+#else
+#error "VOLCL_LEAF_WIDTH must be 4 or 8"
+#endif
+
 typedef struct {
     float t;
-    int prim;       /* code from prim_ids: >= 0 triangle, < 0 sphere */
+    int prim;       /* primitive code (LeafPacket.prim): >= 0 triangle, < 0 sphere */
     float b1, b2;   /* barycentrics of p1 and p2 on triangles */
 } Hit;
 
@@ -85,6 +101,53 @@ inline bool triangle_intersect(__global const Triangle *tri, const Shear *sh, fl
     return true;
 }
 
+/* The watertight test of triangle_intersect on every lane of a leaf packet at once, with the same
+ * operations in the same order (so each lane rounds exactly as the scalar test would), and the
+ * nearest lane's hit in (0, tmax) written to *hit (any_hit: only whether there is one). Ties go
+ * to the lower lane, as they would to the primitive tested first one by one. */
+__attribute__((always_inline))
+inline bool packet_triangles_intersect(__global const LeafPacket *pk, const Shear *sh, float tmax, bool any_hit,
+                                       Hit *hit) {
+#pragma OPENCL FP_CONTRACT OFF
+    __global const float *v = &pk->v[0][0];
+    const int L = VOLCL_LEAF_WIDTH;
+    floatL az = vloadL(0, v + L * sh->kz) - sh->oz;
+    floatL bz = vloadL(0, v + L * (3 + sh->kz)) - sh->oz;
+    floatL cz = vloadL(0, v + L * (6 + sh->kz)) - sh->oz;
+    floatL ax = (vloadL(0, v + L * sh->kx) - sh->ox) - sh->sx * az;
+    floatL ay = (vloadL(0, v + L * sh->ky) - sh->oy) - sh->sy * az;
+    floatL bx = (vloadL(0, v + L * (3 + sh->kx)) - sh->ox) - sh->sx * bz;
+    floatL by = (vloadL(0, v + L * (3 + sh->ky)) - sh->oy) - sh->sy * bz;
+    floatL cx = (vloadL(0, v + L * (6 + sh->kx)) - sh->ox) - sh->sx * cz;
+    floatL cy = (vloadL(0, v + L * (6 + sh->ky)) - sh->oy) - sh->sy * cz;
+    floatL u = cx * by - cy * bx;
+    floatL w1 = ax * cy - ay * cx;
+    floatL w2 = bx * ay - by * ax;
+    const floatL zero = (floatL)(0.0f);
+    intL outside = ((u < zero) | (w1 < zero) | (w2 < zero)) & ((u > zero) | (w1 > zero) | (w2 > zero));
+    floatL det = u + w1 + w2;
+    floatL t_scaled = (u * az + w1 * bz + w2 * cz) * sh->sz;
+    floatL t_det = tmax * det;
+    intL in_range = select((t_scaled > zero) & (t_scaled < t_det), (t_scaled < zero) & (t_scaled > t_det),
+                           det < zero);
+    intL ok = ~outside & (det != zero) & in_range;
+    if (!any(ok)) return false;
+    if (any_hit) return true;   /* a shadow ray needs no distance */
+    floatL inv = 1.0f / det;
+    float t[VOLCL_LEAF_WIDTH], b1[VOLCL_LEAF_WIDTH], b2[VOLCL_LEAF_WIDTH];
+    vstoreL(select((floatL)(VOLCL_INF), t_scaled * inv, ok), 0, t);
+    vstoreL(w1 * inv, 0, b1);
+    vstoreL(w2 * inv, 0, b2);
+    int best = 0;
+    for (int i = 1; i < VOLCL_LEAF_WIDTH; ++i)
+        if (t[i] < t[best]) best = i;
+    hit->t = t[best];
+    hit->prim = pk->prim[best];
+    hit->b1 = b1[best];
+    hit->b2 = b2[best];
+    return true;
+}
+
 /* Nearest root of |o + t d - c| = r in (0, tmax). The discriminant is formed from the distance of
  * the centre to the ray's line (Haines et al., Ray Tracing Gems ch. 7) instead of b^2 - 4ac, which
  * cancels catastrophically for small spheres far from the origin. */
@@ -109,21 +172,23 @@ inline bool sphere_intersect(__global const Sphere *sp, float3 o, float3 d, floa
     return true;
 }
 
-__attribute__((always_inline))
-inline bool prim_intersect(const SceneData *sc, int code, float3 o, float3 d, const Shear *sh, float tmax,
-                           Hit *hit) {
-    float t, b1 = 0.0f, b2 = 0.0f;
+/* Analytic primitives of a packet (codes < 0), one by one after its triangles. */
+inline bool packet_analytic_intersect(const SceneData *sc, __global const LeafPacket *pk, float3 o, float3 d,
+                                      Hit *hit) {
+    bool found = false;
 #if VOLCL_HAS_SPHERES
-    if (code < 0) {
-        if (!sphere_intersect(&sc->spheres[-code - 1], o, d, tmax, &t)) return false;
-    } else
+    for (int i = 0; i < VOLCL_LEAF_WIDTH; ++i) {
+        int code = pk->prim[i];
+        float t;
+        if (code < 0 && sphere_intersect(&sc->spheres[-code - 1], o, d, hit->t, &t)) {
+            hit->t = t;
+            hit->prim = code;
+            hit->b1 = hit->b2 = 0.0f;
+            found = true;
+        }
+    }
 #endif
-    if (!triangle_intersect(&sc->triangles[code], sh, tmax, &t, &b1, &b2)) return false;
-    hit->t = t;
-    hit->prim = code;
-    hit->b1 = b1;
-    hit->b2 = b2;
-    return true;
+    return found;
 }
 
 /* Per-ray constants of the box tests: origin and reciprocal direction splatted over the child
@@ -172,6 +237,21 @@ inline floatW node_children_entry(__global const BvhWideNode *n, const BoxRay *r
     return select((floatW)(VOLCL_INF), enter, enter <= leave);
 }
 
+/* Bit i set where lane i of m is true (-1). */
+inline int lane_mask(intW m) {
+#if VOLCL_BVH_WIDTH == 8
+    int8 bits = m & (int8)(1, 2, 4, 8, 16, 32, 64, 128);
+    int4 b4 = bits.lo | bits.hi;
+#else
+    int4 b4 = m & (int4)(1, 2, 4, 8);
+#endif
+    int2 b2 = b4.lo | b4.hi;
+    return b2.x | b2.y;
+}
+
+/* Index of the lowest set bit of a non-zero mask (OpenCL C 1.2 has clz but not ctz). */
+inline int lowest_lane(int mask) { return 31 - clz(mask & -mask); }
+
 /* Closest hit in (0, tmax). any_hit: return at the first hit found (shadow rays).
  *
  * The traversal keeps a stack of (child, entry distance). At a node every child box the ray enters
@@ -188,48 +268,68 @@ inline bool bvh_trace(const SceneData *sc, float3 o, float3 d, float tmax, bool 
     BoxRay br = box_ray_make(o, inv_d);
     int stack[VOLCL_BVH_STACK];
     float stack_t[VOLCL_BVH_STACK];
-    int top = 1;
-    stack[0] = 0;
-    stack_t[0] = 0.0f;
+    int top = 0;
+    int ref = 0;            /* the node or leaf visited now: the root first */
     bool found = false;
     hit->t = tmax;
     hit->prim = 0;
     hit->b1 = hit->b2 = 0.0f;
-    while (top > 0) {
-        --top;
-        int ref = stack[top];
-        if (stack_t[top] > hit->t * 1.0000004f) continue;
+    for (;;) {
         if (ref >= 0) {
             __global const BvhWideNode *n = &sc->nodes[ref];
-            float enter[VOLCL_BVH_WIDTH];
-            vstoreW(node_children_entry(n, &br, hit->t), 0, enter);
-            int base = top;
-            for (int i = 0; i < VOLCL_BVH_WIDTH; ++i) {
-                float t = enter[i];
-                if (t == VOLCL_INF) continue;
-                int j = top++;
-                if (!any_hit) {
-                    /* insertion into this node's run of the stack, farthest at the bottom */
-                    for (; j > base && stack_t[j - 1] < t; --j) {
-                        stack[j] = stack[j - 1];
-                        stack_t[j] = stack_t[j - 1];
-                    }
+            floatW entry = node_children_entry(n, &br, hit->t);
+            int mask = lane_mask(entry < (floatW)(VOLCL_INF));
+            if (mask != 0) {
+                int i = lowest_lane(mask);
+                mask &= mask - 1;
+                if (mask == 0) {        /* one child entered: visit it without the stack */
+                    ref = n->child[i];
+                    continue;
                 }
-                stack[j] = n->child[i];
-                stack_t[j] = t;
+                float enter[VOLCL_BVH_WIDTH];
+                vstoreW(entry, 0, enter);
+                /* every entered child on the stack; for closest hits each goes into this node's run
+                 * of the stack in order of entry distance, farthest at the bottom */
+                int base = top;
+                for (;;) {
+                    float t = enter[i];
+                    int j = top++;
+                    if (!any_hit) {
+                        for (; j > base && stack_t[j - 1] < t; --j) {
+                            stack[j] = stack[j - 1];
+                            stack_t[j] = stack_t[j - 1];
+                        }
+                    }
+                    stack[j] = n->child[i];
+                    stack_t[j] = t;
+                    if (mask == 0) break;
+                    i = lowest_lane(mask);
+                    mask &= mask - 1;
+                }
+                ref = stack[--top];     /* the nearest, which just passed the box test */
+                continue;
             }
         } else {
             int leaf = ~ref;
             int first = leaf >> 4, end = first + (leaf & 15) + 1;
             for (int i = first; i < end; ++i) {
-                if (prim_intersect(sc, sc->prim_ids[i], o, d, &sh, hit->t, hit)) {
+                __global const LeafPacket *pk = &sc->leaves[i];
+                bool h = packet_triangles_intersect(pk, &sh, hit->t, any_hit, hit);
+                if (h && any_hit) return true;
+                h |= packet_analytic_intersect(sc, pk, o, d, hit);
+                if (h) {
                     found = true;
                     if (any_hit) return true;
                 }
             }
         }
+        /* next from the stack, skipping entries whose box the ray enters beyond the closest hit */
+        do {
+            if (top == 0) return found;
+            --top;
+        } while (stack_t[top] > hit->t * 1.0000004f);
+        ref = stack[top];
     }
-    return found;
 }
 
 #endif

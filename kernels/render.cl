@@ -22,7 +22,7 @@
 #include "camera.h"
 #include "integrator.h"
 
-__kernel void render_pass(__global const BvhWideNode *nodes, __global const int *prim_ids,
+__kernel void render_pass(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
                           __global const Triangle *triangles, __global const TriangleNormals *normals,
                           __global const Sphere *spheres, __global const ShapeInfo *shapes,
                           __global const Bsdf *bsdfs, __global const Light *lights,
@@ -37,7 +37,7 @@ __kernel void render_pass(__global const BvhWideNode *nodes, __global const int 
     if (gid >= pixel_count * slots) return;
     int slot = gid / pixel_count;
     int pixel = first_pixel + gid % pixel_count;
-    SceneData sc = {nodes, prim_ids, triangles, normals, spheres, shapes, bsdfs, lights,
+    SceneData sc = {nodes, leaves, triangles, normals, spheres, shapes, bsdfs, lights,
                     light_tri_cdf, light_tris, media, grids, grid_data, params};
     int width = params->width;
     Rng rng = rng_init(params->seed, (uint)pixel, sample_base + (uint)slot);

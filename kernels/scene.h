@@ -4,7 +4,7 @@
 
 typedef struct {
     __global const BvhWideNode *nodes;
-    __global const int *prim_ids;       /* >= 0: triangle index; < 0: sphere index -(id + 1) */
+    __global const LeafPacket *leaves;  /* the BVH leaves' primitives, in packets */
     __global const Triangle *triangles;
     __global const TriangleNormals *normals;
     __global const Sphere *spheres;

@@ -5,7 +5,7 @@ import pytest
 
 from conftest import run_kernel
 from volcl import layout
-from volcl.bvh_wide import build_wide
+from volcl.bvh_wide import device_bvh
 
 
 def random_scene(rng, n_tri=3000, n_sph=40):
@@ -29,8 +29,8 @@ def upload_arrays(tris, sph_c, sph_r):
     lo = np.concatenate([tris.min(1), sph_c - sph_r[:, None]])
     hi = np.concatenate([tris.max(1), sph_c + sph_r[:, None]])
     codes = np.concatenate([np.arange(len(tris)), -1 - np.arange(len(sph_c))]).astype(np.int32)
-    nodes, order = build_wide(lo, hi)
-    return nodes, codes[order], t, s
+    nodes, leaves = device_bvh(codes, lo, hi, tris)
+    return nodes, leaves, t, s
 
 
 def brute_force(tris, sph_c, sph_r, o, d):
@@ -70,7 +70,7 @@ def brute_force(tris, sph_c, sph_r, o, d):
 def test_device_traversal_matches_brute_force(cl_env, test_program, seed):
     rng = np.random.default_rng(seed)
     tris, sph_c, sph_r = random_scene(rng)
-    nodes, prim_ids, t_arr, s_arr = upload_arrays(tris, sph_c, sph_r)
+    nodes, leaves, t_arr, s_arr = upload_arrays(tris, sph_c, sph_r)
     n = 2000
     o = rng.uniform(-1.5, 1.5, (n, 3))
     d = rng.normal(size=(n, 3))
@@ -82,7 +82,7 @@ def test_device_traversal_matches_brute_force(cl_env, test_program, seed):
     prog = test_program("traversal_tests.cl")
     t_dev, prim_dev, occ = run_kernel(
         cl_env, prog, "trace_rays", n, [(np.float32, ()), (np.int32, ()), (np.int32, ())],
-        inputs=[nodes, prim_ids, t_arr, s_arr, o.astype(np.float32), d.astype(np.float32)])
+        inputs=[nodes, leaves, t_arr, s_arr, o.astype(np.float32), d.astype(np.float32)])
     t_ref, _, ambiguous = brute_force(tris, sph_c, sph_r, o.astype(np.float32).astype(np.float64),
                                       d.astype(np.float32).astype(np.float64))
     hit_ref = np.isfinite(t_ref)
@@ -105,7 +105,7 @@ def test_closed_mesh_does_not_leak_through_shared_edges(cl_env, test_program):
     box = trimesh.creation.box(extents=(2, 2, 2))
     box = box.subdivide().subdivide()
     tris = np.asarray(box.vertices)[np.asarray(box.faces)]
-    nodes, prim_ids, t_arr, s_arr = upload_arrays(tris, np.zeros((0, 3)), np.zeros(0))
+    nodes, leaves, t_arr, s_arr = upload_arrays(tris, np.zeros((0, 3)), np.zeros(0))
     edges = np.asarray(box.edges_unique)
     v = np.asarray(box.vertices)
     rng = np.random.default_rng(3)
@@ -115,5 +115,5 @@ def test_closed_mesh_does_not_leak_through_shared_edges(cl_env, test_program):
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     prog = test_program("traversal_tests.cl")
     t_dev, _, _ = run_kernel(cl_env, prog, "trace_rays", len(o), [(np.float32, ()), (np.int32, ()), (np.int32, ())],
-                             inputs=[nodes, prim_ids, t_arr, s_arr, o.astype(np.float32), d.astype(np.float32)])
+                             inputs=[nodes, leaves, t_arr, s_arr, o.astype(np.float32), d.astype(np.float32)])
     assert np.isfinite(t_dev).all(), f"{(~np.isfinite(t_dev)).sum()} rays escaped the closed box"

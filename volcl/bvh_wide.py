@@ -34,10 +34,51 @@ STACK = 128     # kernels/bvh.h VOLCL_BVH_STACK
 
 
 def build_wide(lo, hi, max_leaf=4, width=layout.BVH_WIDTH):
-    """The device BVH over primitive boxes lo, hi ((n, 3) each): (wide nodes, order) with order as
-    in volcl.bvh.build_bvh; an empty input gives the one empty node."""
+    """The wide BVH over primitive boxes lo, hi ((n, 3) each): (wide nodes, order) with order as
+    in volcl.bvh.build_bvh, leaves referring to primitive slots; an empty input gives the one
+    empty node."""
     binary, order = build_bvh(lo, hi, max_leaf=max_leaf)
     return collapse(binary, width), order
+
+
+def device_bvh(codes, lo, hi, triangles, max_leaf=4):
+    """What the kernels traverse: (wide nodes, leaf packets) over primitives with codes `codes`
+    (>= 0: a row of `triangles`, (m, 3, 3) vertices; < 0: an analytic primitive) and boxes lo, hi."""
+    wide, order = build_wide(lo, hi, max_leaf=max_leaf)
+    return pack_leaves(wide, np.asarray(codes, np.int32)[order], triangles)
+
+
+def pack_leaves(wide, slot_codes, triangles, lanes=layout.LEAF_WIDTH):
+    """Leaf packets (layout.LEAF_PACKET) for the leaves of `wide`, whose references name primitive
+    slots: slot i holds the primitive of code slot_codes[i]. Returns (wide with leaf references
+    to packets instead, packets). A leaf of k primitives takes ceil(k / lanes) packets, in slot
+    order; triangle lanes get their vertices (float32), other lanes a zero triangle."""
+    wide = wide.copy()
+    child = wide["child"]
+    is_leaf = used_slots(wide) & (child < 0)
+    first, count = decode_leaf(child[is_leaf])
+    n_packets = -(-count // lanes)
+    by_slot = np.argsort(first, kind="stable")
+    start = np.empty_like(first)
+    start[by_slot] = np.cumsum(n_packets[by_slot]) - n_packets[by_slot]
+    child[is_leaf] = leaf_ref(start, n_packets)
+    packets = np.zeros(max(int(n_packets.sum()), 1), layout.LEAF_PACKET)
+    # every slot's packet and lane (leaves tile the slots in order of their first slot)
+    leaf_of_slot = np.repeat(by_slot, count[by_slot])
+    rank = np.arange(len(slot_codes)) - first[leaf_of_slot]
+    packet, lane = start[leaf_of_slot] + rank // lanes, rank % lanes
+    codes = np.asarray(slot_codes, np.int32)
+    packets["prim"][packet, lane] = codes
+    tri = codes >= 0
+    verts = np.asarray(triangles, np.float32).reshape(-1, 9)
+    packets["v"][packet[tri], :, lane[tri]] = verts[codes[tri]]
+    return wide, packets
+
+
+def used_slots(wide):
+    """(nodes, width) mask of the child slots in use (the others hold inverted boxes)."""
+    b = wide["bounds"]
+    return b[:, 0, :] <= b[:, 3, :]
 
 
 def leaf_ref(first, count):

@@ -29,6 +29,11 @@ def bvh_wide_node(width=BVH_WIDTH):
 
 BVH_WIDE_NODE = bvh_wide_node()
 
+# Up to LEAF_WIDTH primitives of a BVH leaf (kernels/types.h LeafPacket): triangle vertices as nine
+# rows (p0 xyz, p1 xyz, p2 xyz) of LEAF_WIDTH floats, and the primitives' codes.
+LEAF_WIDTH = 4
+LEAF_PACKET = np.dtype([("v", np.float32, (9, LEAF_WIDTH)), ("prim", np.int32, LEAF_WIDTH)])
+
 TRIANGLE = np.dtype([
     ("p0", *f3), ("shape", np.int32),
     ("p1", *f3), ("normals", np.int32),
@@ -96,7 +101,7 @@ RENDER_PARAMS = np.dtype([
 
 # name in kernels/types.h -> dtype, for the layout probe
 SHARED_STRUCTS = {
-    "BvhWideNode": BVH_WIDE_NODE, "Triangle": TRIANGLE, "TriangleNormals": TRIANGLE_NORMALS, "Sphere": SPHERE,
+    "BvhWideNode": BVH_WIDE_NODE, "LeafPacket": LEAF_PACKET, "Triangle": TRIANGLE, "TriangleNormals": TRIANGLE_NORMALS, "Sphere": SPHERE,
     "ShapeInfo": SHAPE_INFO, "Bsdf": BSDF, "Light": LIGHT, "Medium": MEDIUM, "GridVolume": GRID_VOLUME,
     "RenderParams": RENDER_PARAMS,
 }

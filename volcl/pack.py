@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import layout
-from .bvh_wide import build_wide, empty_wide
+from .bvh_wide import device_bvh, empty_wide
 from .features import detect
 from .grids import GridPacker
 from .mesh import triangle_areas32
@@ -257,12 +257,10 @@ def pack(scene: Scene, features: dict | None = None, max_leaf: int = 4, majorant
     codes = np.concatenate(codes)
     t0 = time.perf_counter()
     if len(codes):
-        nodes, order = build_wide(np.concatenate(lo), np.concatenate(hi), max_leaf=max_leaf)
-        prim_ids = codes[order].astype(np.int32)
+        nodes, leaves = device_bvh(codes, np.concatenate(lo), np.concatenate(hi), tri_v, max_leaf=max_leaf)
         bounds_lo, bounds_hi = np.concatenate(lo).min(0), np.concatenate(hi).max(0)
     else:
-        nodes = empty_wide()
-        prim_ids = np.zeros(1, np.int32)
+        nodes, leaves = empty_wide(), np.zeros(1, layout.LEAF_PACKET)
         bounds_lo = bounds_hi = np.zeros(3)
     bvh_seconds = time.perf_counter() - t0
 
@@ -295,7 +293,7 @@ def pack(scene: Scene, features: dict | None = None, max_leaf: int = 4, majorant
     params["scene_radius"] = 0.5 * float(np.linalg.norm(bounds_hi - bounds_lo))
 
     arrays = {
-        "nodes": nodes, "prim_ids": prim_ids, "triangles": tris, "normals": normals, "spheres": spheres,
+        "nodes": nodes, "leaves": leaves, "triangles": tris, "normals": normals, "spheres": spheres,
         "shapes": shape_arr, "bsdfs": _pack_bsdfs(bsdfs), "lights": light_arr,
         "light_tri_cdf": np.asarray(light_cdf or [1.0], np.float32),
         "light_tris": np.asarray(light_tris or [0], np.int32),

@@ -75,7 +75,7 @@ class Renderer:
     device runs fixed launches of up to MAX_ITEMS work items, with no timing in between).
     """
 
-    ARG_ORDER = ("nodes", "prim_ids", "triangles", "normals", "spheres", "shapes", "bsdfs", "lights",
+    ARG_ORDER = ("nodes", "leaves", "triangles", "normals", "spheres", "shapes", "bsdfs", "lights",
                  "light_tri_cdf", "light_tris", "media", "grids", "grid_data", "params", "filter_table")
 
     def __init__(self, scene: Scene, device: devmod.DeviceInfo | None = None, features: dict | None = None,

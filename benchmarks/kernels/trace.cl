@@ -5,11 +5,11 @@
 #include "scene.h"
 #include "bvh.h"
 
-inline SceneData trace_scene(__global const BvhWideNode *nodes, __global const int *prim_ids,
+inline SceneData trace_scene(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
                              __global const Triangle *triangles, __global const Sphere *spheres) {
     SceneData sc;
     sc.nodes = nodes;
-    sc.prim_ids = prim_ids;
+    sc.leaves = leaves;
     sc.triangles = triangles;
     sc.normals = 0;
     sc.spheres = spheres;
@@ -25,26 +25,26 @@ inline SceneData trace_scene(__global const BvhWideNode *nodes, __global const i
     return sc;
 }
 
-__kernel void trace_closest(__global const BvhWideNode *nodes, __global const int *prim_ids,
+__kernel void trace_closest(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
                             __global const Triangle *triangles, __global const Sphere *spheres,
                             __global const float *origins, __global const float *dirs,
                             __global float *t_out, __global int *prim_out, int n) {
     int i = get_global_id(0);
     if (i >= n) return;
-    SceneData sc = trace_scene(nodes, prim_ids, triangles, spheres);
+    SceneData sc = trace_scene(nodes, leaves, triangles, spheres);
     Hit h;
     bool hit = bvh_trace(&sc, vload3(i, origins), vload3(i, dirs), INFINITY, false, &h);
     t_out[i] = hit ? h.t : INFINITY;
     prim_out[i] = hit ? h.prim : 0x7fffffff;
 }
 
-__kernel void trace_any(__global const BvhWideNode *nodes, __global const int *prim_ids,
+__kernel void trace_any(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
                         __global const Triangle *triangles, __global const Sphere *spheres,
                         __global const float *origins, __global const float *dirs,
                         __global const float *t_max, __global int *occluded, int n) {
     int i = get_global_id(0);
     if (i >= n) return;
-    SceneData sc = trace_scene(nodes, prim_ids, triangles, spheres);
+    SceneData sc = trace_scene(nodes, leaves, triangles, spheres);
     Hit h;
     occluded[i] = bvh_trace(&sc, vload3(i, origins), vload3(i, dirs), t_max[i], true, &h) ? 1 : 0;
 }

@@ -11,13 +11,13 @@
 #include "bvh.h"
 #include "surface.h"
 
-__kernel void walk_inside(__global const BvhWideNode *nodes, __global const int *prim_ids,
+__kernel void walk_inside(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
                           __global const Triangle *triangles, __global const float *starts,
                           __global int *leaks, __global int *hits, int bounces) {
     int i = get_global_id(0);
     SceneData sc;
     sc.nodes = nodes;
-    sc.prim_ids = prim_ids;
+    sc.leaves = leaves;
     sc.triangles = triangles;
     Rng rng = rng_init(12345u, (uint)i, 0u);
     float3 o = vload3(i, starts);

@@ -6,14 +6,14 @@
 #include "scene.h"
 #include "bvh.h"
 
-__kernel void trace_rays(__global const BvhWideNode *nodes, __global const int *prim_ids,
+__kernel void trace_rays(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
                          __global const Triangle *triangles, __global const Sphere *spheres,
                          __global const float *origins, __global const float *dirs,
                          __global float *t_out, __global int *prim_out, __global int *occluded_out) {
     int i = get_global_id(0);
     SceneData sc;
     sc.nodes = nodes;
-    sc.prim_ids = prim_ids;
+    sc.leaves = leaves;
     sc.triangles = triangles;
     sc.spheres = spheres;
     float3 o = vload3(i, origins), d = vload3(i, dirs);
