@@ -1,4 +1,5 @@
-/* Ray queries against the BVH: closest hit and any hit, over triangles and analytic spheres.
+/* Ray queries against the BVH: closest hit, any hit, and the shadow query (the closest hit on a
+ * null surface unless an opaque one is in the way), over triangles and analytic spheres.
  *
  * Triangles use the watertight test of Woop, Benthin and Wald (2013): the ray is sheared to +z and
  * edge functions decide coverage, so a ray through a shared edge or vertex hits at least one of the
@@ -39,6 +40,11 @@ typedef int8 intL;
 #error "VOLCL_LEAF_WIDTH must be 4 or 8"
 #endif
 
+/* bvh_trace queries */
+#define TRACE_CLOSEST 0     /* the nearest hit */
+#define TRACE_ANY 1         /* whether anything is hit (the hit reported is not the nearest) */
+#define TRACE_SHADOW 2      /* the nearest hit, or some opaque hit (it is not searched beyond one) */
+
 typedef struct {
     float t;
     int prim;       /* primitive code (LeafPacket.prim): >= 0 triangle, < 0 sphere */
@@ -72,42 +78,16 @@ inline Shear shear_make(float3 o, float3 d) {
     return s;
 }
 
-/* Vertices are read in the ray's permuted axis order straight from memory (p[k] with a per-ray k),
- * which costs an address computation instead of a select chain per component. */
+/* The watertight test on every lane of a leaf packet at once, for hits in (0, tmax); returns the
+ * lanes hit as a mask. Vertices are read in the ray's permuted axis order straight from memory
+ * (row 3 * vertex + k with a per-ray k), which costs an address computation instead of a select
+ * chain per component. Every lane does the operations of the scalar test in the same order, so a
+ * triangle rounds alike in whichever packet and lane it sits. */
 __attribute__((always_inline))
-inline bool triangle_intersect(__global const Triangle *tri, const Shear *sh, float tmax,
-                               float *t_out, float *b1_out, float *b2_out) {
+inline intL packet_triangles_hit(__global const LeafPacket *pk, const Shear *sh, float tmax, floatL *t_scaled,
+                                 floatL *det, floatL *e1, floatL *e2) {
     /* the edge functions must round identically for the two triangles sharing an edge, and a fused
      * multiply-add in one of them breaks that (and makes zero-size triangles report hits) */
-#pragma OPENCL FP_CONTRACT OFF
-    float az = tri->p0[sh->kz] - sh->oz, bz = tri->p1[sh->kz] - sh->oz, cz = tri->p2[sh->kz] - sh->oz;
-    float ax = (tri->p0[sh->kx] - sh->ox) - sh->sx * az, ay = (tri->p0[sh->ky] - sh->oy) - sh->sy * az;
-    float bx = (tri->p1[sh->kx] - sh->ox) - sh->sx * bz, by = (tri->p1[sh->ky] - sh->oy) - sh->sy * bz;
-    float cx = (tri->p2[sh->kx] - sh->ox) - sh->sx * cz, cy = (tri->p2[sh->ky] - sh->oy) - sh->sy * cz;
-    float u = cx * by - cy * bx;
-    float v = ax * cy - ay * cx;
-    float w = bx * ay - by * ax;
-    if ((u < 0.0f || v < 0.0f || w < 0.0f) && (u > 0.0f || v > 0.0f || w > 0.0f)) return false;
-    float det = u + v + w;
-    if (det == 0.0f) return false;
-    float t_scaled = (u * az + v * bz + w * cz) * sh->sz;
-    /* compare before dividing, with the sign of det folded in */
-    if (det < 0.0f ? (t_scaled >= 0.0f || t_scaled <= tmax * det) : (t_scaled <= 0.0f || t_scaled >= tmax * det))
-        return false;
-    float inv = 1.0f / det;
-    *t_out = t_scaled * inv;
-    *b1_out = v * inv;
-    *b2_out = w * inv;
-    return true;
-}
-
-/* The watertight test of triangle_intersect on every lane of a leaf packet at once, with the same
- * operations in the same order (so each lane rounds exactly as the scalar test would), and the
- * nearest lane's hit in (0, tmax) written to *hit (any_hit: only whether there is one). Ties go
- * to the lower lane, as they would to the primitive tested first one by one. */
-__attribute__((always_inline))
-inline bool packet_triangles_intersect(__global const LeafPacket *pk, const Shear *sh, float tmax, bool any_hit,
-                                       Hit *hit) {
 #pragma OPENCL FP_CONTRACT OFF
     __global const float *v = &pk->v[0][0];
     const int L = VOLCL_LEAF_WIDTH;
@@ -121,23 +101,42 @@ inline bool packet_triangles_intersect(__global const LeafPacket *pk, const Shea
     floatL cx = (vloadL(0, v + L * (6 + sh->kx)) - sh->ox) - sh->sx * cz;
     floatL cy = (vloadL(0, v + L * (6 + sh->ky)) - sh->oy) - sh->sy * cz;
     floatL u = cx * by - cy * bx;
-    floatL w1 = ax * cy - ay * cx;
-    floatL w2 = bx * ay - by * ax;
+    *e1 = ax * cy - ay * cx;
+    *e2 = bx * ay - by * ax;
     const floatL zero = (floatL)(0.0f);
-    intL outside = ((u < zero) | (w1 < zero) | (w2 < zero)) & ((u > zero) | (w1 > zero) | (w2 > zero));
-    floatL det = u + w1 + w2;
-    floatL t_scaled = (u * az + w1 * bz + w2 * cz) * sh->sz;
-    floatL t_det = tmax * det;
-    intL in_range = select((t_scaled > zero) & (t_scaled < t_det), (t_scaled < zero) & (t_scaled > t_det),
-                           det < zero);
-    intL ok = ~outside & (det != zero) & in_range;
-    if (!any(ok)) return false;
-    if (any_hit) return true;   /* a shadow ray needs no distance */
+    intL outside = ((u < zero) | (*e1 < zero) | (*e2 < zero)) & ((u > zero) | (*e1 > zero) | (*e2 > zero));
+    *det = u + *e1 + *e2;
+    *t_scaled = (u * az + *e1 * bz + *e2 * cz) * sh->sz;
+    /* compare before dividing, with the sign of det folded in; det == 0 (degenerate) never hits */
+    floatL t_det = tmax * *det;
+    intL in_range = select((*t_scaled > zero) & (*t_scaled < t_det), (*t_scaled < zero) & (*t_scaled > t_det),
+                           *det < zero);
+    return ~outside & (*det != zero) & in_range;
+}
+
+/* The triangles of a packet: 0 when none is hit in (0, tmax); 1 after writing the nearest hit to
+ * *hit (ties go to the lower lane, as to the primitive tested first one by one); 2 when the query
+ * can stop: TRACE_ANY on any hit, TRACE_SHADOW on a hit of an opaque lane (*hit: that lane). */
+__attribute__((always_inline))
+inline int packet_triangles_intersect(__global const LeafPacket *pk, const Shear *sh, float tmax, int mode,
+                                      Hit *hit) {
+    floatL t_scaled, det, e1, e2;
+    intL ok = packet_triangles_hit(pk, sh, tmax, &t_scaled, &det, &e1, &e2);
+    if (!any(ok)) return 0;
+    if (mode == TRACE_ANY) return 2;    /* an occlusion test needs no distance */
+    int stop = 0;
+    if (mode == TRACE_SHADOW) {
+        intL opaque = ok & vloadL(0, pk->opaque);
+        if (any(opaque)) {
+            ok = opaque;
+            stop = 2;
+        }
+    }
     floatL inv = 1.0f / det;
     float t[VOLCL_LEAF_WIDTH], b1[VOLCL_LEAF_WIDTH], b2[VOLCL_LEAF_WIDTH];
     vstoreL(select((floatL)(VOLCL_INF), t_scaled * inv, ok), 0, t);
-    vstoreL(w1 * inv, 0, b1);
-    vstoreL(w2 * inv, 0, b2);
+    vstoreL(e1 * inv, 0, b1);
+    vstoreL(e2 * inv, 0, b2);
     int best = 0;
     for (int i = 1; i < VOLCL_LEAF_WIDTH; ++i)
         if (t[i] < t[best]) best = i;
@@ -145,7 +144,7 @@ inline bool packet_triangles_intersect(__global const LeafPacket *pk, const Shea
     hit->prim = pk->prim[best];
     hit->b1 = b1[best];
     hit->b2 = b2[best];
-    return true;
+    return stop ? stop : 1;
 }
 
 /* Nearest root of |o + t d - c| = r in (0, tmax). The discriminant is formed from the distance of
@@ -172,10 +171,11 @@ inline bool sphere_intersect(__global const Sphere *sp, float3 o, float3 d, floa
     return true;
 }
 
-/* Analytic primitives of a packet (codes < 0), one by one after its triangles. */
-inline bool packet_analytic_intersect(const SceneData *sc, __global const LeafPacket *pk, float3 o, float3 d,
-                                      Hit *hit) {
-    bool found = false;
+/* The analytic primitives of a packet (codes < 0), one by one after its triangles; returns as
+ * packet_triangles_intersect does. */
+inline int packet_analytic_intersect(const SceneData *sc, __global const LeafPacket *pk, float3 o, float3 d,
+                                     int mode, Hit *hit) {
+    int found = 0;
 #if VOLCL_HAS_SPHERES
     for (int i = 0; i < VOLCL_LEAF_WIDTH; ++i) {
         int code = pk->prim[i];
@@ -184,7 +184,8 @@ inline bool packet_analytic_intersect(const SceneData *sc, __global const LeafPa
             hit->t = t;
             hit->prim = code;
             hit->b1 = hit->b2 = 0.0f;
-            found = true;
+            if (mode == TRACE_ANY || (mode == TRACE_SHADOW && pk->opaque[i])) return 2;
+            found = 1;
         }
     }
 #endif
@@ -252,15 +253,15 @@ inline int lane_mask(intW m) {
 /* Index of the lowest set bit of a non-zero mask (OpenCL C 1.2 has clz but not ctz). */
 inline int lowest_lane(int mask) { return 31 - clz(mask & -mask); }
 
-/* Closest hit in (0, tmax). any_hit: return at the first hit found (shadow rays).
+/* A query (TRACE_*) for hits in (0, tmax); true when something is hit, with *hit as the mode says.
  *
  * The traversal keeps a stack of (child, entry distance). At a node every child box the ray enters
  * goes on the stack; for closest hits they are inserted in order of entry distance, nearest on top,
  * so the nearest is visited next and a hit found there culls the others when they come off the
- * stack (an entry distance beyond the hit, with the box test's tolerance). Shadow rays skip the
- * ordering. The builder bounds the stack depth any ray can reach by VOLCL_BVH_STACK
+ * stack (an entry distance beyond the hit, with the box test's tolerance). Occlusion tests
+ * (TRACE_ANY) skip the ordering; the shadow query keeps it, for the nearest null surface. The builder bounds the stack depth any ray can reach by VOLCL_BVH_STACK
  * (volcl/bvh_wide.py). An empty scene is one node without children, which no ray enters. */
-inline bool bvh_trace(const SceneData *sc, float3 o, float3 d, float tmax, bool any_hit, Hit *hit) {
+inline bool bvh_trace(const SceneData *sc, float3 o, float3 d, float tmax, int mode, Hit *hit) {
     Shear sh = shear_make(o, d);
     /* a zero direction component becomes a tiny one of the same sign: its slab then spans
      * +-1e30 instead of producing 0 * INF = NaN for an origin on the slab plane */
@@ -294,7 +295,7 @@ inline bool bvh_trace(const SceneData *sc, float3 o, float3 d, float tmax, bool 
                 for (;;) {
                     float t = enter[i];
                     int j = top++;
-                    if (!any_hit) {
+                    if (mode != TRACE_ANY) {
                         for (; j > base && stack_t[j - 1] < t; --j) {
                             stack[j] = stack[j - 1];
                             stack_t[j] = stack_t[j - 1];
@@ -314,13 +315,11 @@ inline bool bvh_trace(const SceneData *sc, float3 o, float3 d, float tmax, bool 
             int first = leaf >> 4, end = first + (leaf & 15) + 1;
             for (int i = first; i < end; ++i) {
                 __global const LeafPacket *pk = &sc->leaves[i];
-                bool h = packet_triangles_intersect(pk, &sh, hit->t, any_hit, hit);
-                if (h && any_hit) return true;
-                h |= packet_analytic_intersect(sc, pk, o, d, hit);
-                if (h) {
-                    found = true;
-                    if (any_hit) return true;
-                }
+                int h = packet_triangles_intersect(pk, &sh, hit->t, mode, hit);
+                if (h == 2) return true;
+                int ha = packet_analytic_intersect(sc, pk, o, d, mode, hit);
+                if (ha == 2) return true;
+                found |= (h | ha) != 0;
             }
         }
         /* next from the stack, skipping entries whose box the ray enters beyond the closest hit */

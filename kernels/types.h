@@ -19,14 +19,16 @@ typedef struct {
 } BvhWideNode;
 
 /* Up to VOLCL_LEAF_WIDTH primitives of a BVH leaf, tested together: the triangles' vertex
- * coordinates as nine rows (p0 x, y, z, p1 x, y, z, p2 x, y, z) of one float per primitive, and
- * each primitive's code (>= 0: index into the Triangle array; < 0: sphere -(code + 1)). Lanes of
- * spheres and unused lanes hold a zero triangle, which no ray hits (its det is exactly 0); unused
- * lanes have code 0. */
+ * coordinates as nine rows (p0 x, y, z, p1 x, y, z, p2 x, y, z) of one float per primitive, each
+ * primitive's code (>= 0: index into the Triangle array; < 0: sphere -(code + 1)), and -1 where
+ * the primitive's surface is opaque (its bsdf is not null; shadow rays stop there), else 0. Lanes
+ * of spheres and unused lanes hold a zero triangle, which no ray hits (its det is exactly 0);
+ * unused lanes have code 0. */
 #define VOLCL_LEAF_WIDTH 4
 typedef struct {
     float v[9][VOLCL_LEAF_WIDTH];
     int prim[VOLCL_LEAF_WIDTH];
+    int opaque[VOLCL_LEAF_WIDTH];
 } LeafPacket;
 
 /* A triangle as its three vertices: the watertight test needs the exact shared vertices (a vertex

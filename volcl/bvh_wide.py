@@ -41,18 +41,21 @@ def build_wide(lo, hi, max_leaf=4, width=layout.BVH_WIDTH):
     return collapse(binary, width), order
 
 
-def device_bvh(codes, lo, hi, triangles, max_leaf=4):
+def device_bvh(codes, lo, hi, triangles, opaque=None, max_leaf=4):
     """What the kernels traverse: (wide nodes, leaf packets) over primitives with codes `codes`
-    (>= 0: a row of `triangles`, (m, 3, 3) vertices; < 0: an analytic primitive) and boxes lo, hi."""
+    (>= 0: a row of `triangles`, (m, 3, 3) vertices; < 0: an analytic primitive), boxes lo, hi,
+    and whether each has an opaque surface (default: all)."""
     wide, order = build_wide(lo, hi, max_leaf=max_leaf)
-    return pack_leaves(wide, np.asarray(codes, np.int32)[order], triangles)
+    opaque = np.ones(len(codes), bool) if opaque is None else np.asarray(opaque, bool)
+    return pack_leaves(wide, np.asarray(codes, np.int32)[order], triangles, opaque[order])
 
 
-def pack_leaves(wide, slot_codes, triangles, lanes=layout.LEAF_WIDTH):
+def pack_leaves(wide, slot_codes, triangles, slot_opaque, lanes=layout.LEAF_WIDTH):
     """Leaf packets (layout.LEAF_PACKET) for the leaves of `wide`, whose references name primitive
-    slots: slot i holds the primitive of code slot_codes[i]. Returns (wide with leaf references
-    to packets instead, packets). A leaf of k primitives takes ceil(k / lanes) packets, in slot
-    order; triangle lanes get their vertices (float32), other lanes a zero triangle."""
+    slots: slot i holds the primitive of code slot_codes[i], opaque where slot_opaque[i]. Returns
+    (wide with leaf references to packets instead, packets). A leaf of k primitives takes
+    ceil(k / lanes) packets, in slot order; triangle lanes get their vertices (float32), other
+    lanes a zero triangle."""
     wide = wide.copy()
     child = wide["child"]
     is_leaf = used_slots(wide) & (child < 0)
@@ -69,6 +72,7 @@ def pack_leaves(wide, slot_codes, triangles, lanes=layout.LEAF_WIDTH):
     packet, lane = start[leaf_of_slot] + rank // lanes, rank % lanes
     codes = np.asarray(slot_codes, np.int32)
     packets["prim"][packet, lane] = codes
+    packets["opaque"][packet, lane] = np.where(slot_opaque, -1, 0)
     tri = codes >= 0
     verts = np.asarray(triangles, np.float32).reshape(-1, 9)
     packets["v"][packet[tri], :, lane[tri]] = verts[codes[tri]]

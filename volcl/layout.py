@@ -30,9 +30,11 @@ def bvh_wide_node(width=BVH_WIDTH):
 BVH_WIDE_NODE = bvh_wide_node()
 
 # Up to LEAF_WIDTH primitives of a BVH leaf (kernels/types.h LeafPacket): triangle vertices as nine
-# rows (p0 xyz, p1 xyz, p2 xyz) of LEAF_WIDTH floats, and the primitives' codes.
+# rows (p0 xyz, p1 xyz, p2 xyz) of LEAF_WIDTH floats, the primitives' codes, and -1 for each
+# primitive with an opaque surface (0 for null surfaces and unused lanes).
 LEAF_WIDTH = 4
-LEAF_PACKET = np.dtype([("v", np.float32, (9, LEAF_WIDTH)), ("prim", np.int32, LEAF_WIDTH)])
+LEAF_PACKET = np.dtype([("v", np.float32, (9, LEAF_WIDTH)), ("prim", np.int32, LEAF_WIDTH),
+                        ("opaque", np.int32, LEAF_WIDTH)])
 
 TRIANGLE = np.dtype([
     ("p0", *f3), ("shape", np.int32),

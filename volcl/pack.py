@@ -236,6 +236,7 @@ def pack(scene: Scene, features: dict | None = None, max_leaf: int = 4, majorant
     for i, rec in enumerate(lights):
         light_arr[i] = rec
 
+    bsdf_arr = _pack_bsdfs(bsdfs)
     shape_arr = np.zeros(max(len(scene.shapes), 1), layout.SHAPE_INFO)
     for i, s in enumerate(scene.shapes):
         r = shape_arr[i]
@@ -257,7 +258,12 @@ def pack(scene: Scene, features: dict | None = None, max_leaf: int = 4, majorant
     codes = np.concatenate(codes)
     t0 = time.perf_counter()
     if len(codes):
-        nodes, leaves = device_bvh(codes, np.concatenate(lo), np.concatenate(hi), tri_v, max_leaf=max_leaf)
+        # shadow rays stop at the first opaque surface (kernels/bvh.h TRACE_SHADOW)
+        shape_opaque = bsdf_arr["type"][shape_arr["bsdf"]] != layout.BSDF_TYPES["null"]
+        sphere_shape = np.array([shape_index[id(s)] for s in sphere_shapes], np.int64)
+        opaque = np.concatenate([shape_opaque[tri_shape], shape_opaque[sphere_shape]])
+        nodes, leaves = device_bvh(codes, np.concatenate(lo), np.concatenate(hi), tri_v, opaque,
+                                   max_leaf=max_leaf)
         bounds_lo, bounds_hi = np.concatenate(lo).min(0), np.concatenate(hi).max(0)
     else:
         nodes, leaves = empty_wide(), np.zeros(1, layout.LEAF_PACKET)
@@ -294,7 +300,7 @@ def pack(scene: Scene, features: dict | None = None, max_leaf: int = 4, majorant
 
     arrays = {
         "nodes": nodes, "leaves": leaves, "triangles": tris, "normals": normals, "spheres": spheres,
-        "shapes": shape_arr, "bsdfs": _pack_bsdfs(bsdfs), "lights": light_arr,
+        "shapes": shape_arr, "bsdfs": bsdf_arr, "lights": light_arr,
         "light_tri_cdf": np.asarray(light_cdf or [1.0], np.float32),
         "light_tris": np.asarray(light_tris or [0], np.int32),
         "media": media_arr, "grids": grid_desc, "grid_data": grid_data,

@@ -33,7 +33,7 @@ __kernel void trace_closest(__global const BvhWideNode *nodes, __global const Le
     if (i >= n) return;
     SceneData sc = trace_scene(nodes, leaves, triangles, spheres);
     Hit h;
-    bool hit = bvh_trace(&sc, vload3(i, origins), vload3(i, dirs), INFINITY, false, &h);
+    bool hit = bvh_trace(&sc, vload3(i, origins), vload3(i, dirs), INFINITY, TRACE_CLOSEST, &h);
     t_out[i] = hit ? h.t : INFINITY;
     prim_out[i] = hit ? h.prim : 0x7fffffff;
 }
@@ -46,5 +46,5 @@ __kernel void trace_any(__global const BvhWideNode *nodes, __global const LeafPa
     if (i >= n) return;
     SceneData sc = trace_scene(nodes, leaves, triangles, spheres);
     Hit h;
-    occluded[i] = bvh_trace(&sc, vload3(i, origins), vload3(i, dirs), t_max[i], true, &h) ? 1 : 0;
+    occluded[i] = bvh_trace(&sc, vload3(i, origins), vload3(i, dirs), t_max[i], TRACE_ANY, &h) ? 1 : 0;
 }

@@ -25,7 +25,7 @@ __kernel void walk_inside(__global const BvhWideNode *nodes, __global const Leaf
     int leaked = 0, n_hits = 0;
     for (int b = 0; b < bounces; ++b) {
         Hit h;
-        if (!bvh_trace(&sc, o, d, INFINITY, false, &h)) { leaked = 1; break; }
+        if (!bvh_trace(&sc, o, d, INFINITY, TRACE_CLOSEST, &h)) { leaked = 1; break; }
         ++n_hits;
         SurfacePoint s = surface_point(&sc, &h, o, d);
         /* the inside is the side the ray arrived from */
