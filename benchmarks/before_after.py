@@ -36,7 +36,10 @@ sys.path.insert(0, {root!r})
 import numpy as np
 from volcl import device as devmod
 from volcl.scene import load
-from volcl.render import Renderer
+try:
+    from volcl.renderer import Renderer
+except ImportError:         # the renderer's module before it was renamed
+    from volcl.render import Renderer
 
 def cpu():
     r = resource.getrusage(resource.RUSAGE_SELF)

@@ -48,7 +48,7 @@ def log(msg):
 def render_volcl(scene_path, out, spp, seed, defines, device):
     from volcl import __version__
     from volcl.image import write_image
-    from volcl.render import Renderer
+    from volcl.renderer import Renderer
     from volcl.scene import load
     from volcl.scene.model import Scene
     scene = load(scene_path, defines)

@@ -68,7 +68,7 @@ def repeated(scene_path, defines, choices, reference, width, height, seeds, budg
     from volcl.accuracy import relative_mse
     from volcl.converge import load_reference
     from volcl.estimator import CHOICES
-    from volcl.render import Renderer
+    from volcl.renderer import Renderer
     from volcl.scene import load
     sc = load(ROOT / scene_path, defines)
     sc.camera.width, sc.camera.height = width, height

@@ -49,7 +49,7 @@ def log(msg):
 def timed_renders(scene, device, spp, repeat, variants, seed):
     """Best-of-`repeat` seconds and the last result per variant (majorant cells). The repeats
     interleave the variants, so that a load change on a shared machine hits them alike."""
-    from volcl.render import Renderer
+    from volcl.renderer import Renderer
     renderers = []
     for k, cells in enumerate(variants):
         r = Renderer(scene, device=device, seed=seed + k, majorant_cells=cells)

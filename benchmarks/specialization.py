@@ -52,7 +52,7 @@ def throughput(scene, spp, width, height, repeat, device):
     sys.path.insert(0, str(ROOT))
     from volcl import device as devmod
     from volcl.features import all_features, describe
-    from volcl.render import Renderer
+    from volcl.renderer import Renderer
     from volcl.scene import load
     sc = load(scene)
     sc.camera.width, sc.camera.height = width, height

@@ -240,173 +240,234 @@ inline float3 equiangular_direct(const SceneData *sc, Rng *rng, const Equiangula
 }
 #endif
 
-/* Radiance arriving at o from direction -d. *cutoffs counts segments whose tracking hit its bound. */
-inline float3 integrator_radiance(const SceneData *sc, Rng *rng, float3 o, float3 d, float t_max, uint *cutoffs) {
-    __global const RenderParams *rp = sc->params;
-    float3 L = (float3)(0.0f), beta = (float3)(1.0f);
-    int depth = 0;
-    int medium = camera_start_medium(sc, &o, d, &t_max, rp->camera_medium);
-    bool specular = true;       /* last vertex was delta (or the camera): emission hits get no MIS */
-    float prev_pdf = 0.0f;      /* solid-angle pdf of the direction sampled at the last vertex */
-    float3 prev_p = o;
-    float eta_scale = 1.0f;
-    bool do_nee = rp->light_count > 0 && rp->nee;
+/* The state of a path between steps: the radiance gathered and the throughput, the ray traced next
+ * (o, d up to t_max, the medium it travels in), and what the vertex behind it leaves for MIS. */
+typedef struct {
+    float3 L, beta;
+    float3 o, d;
+    float t_max;
     /* Distance back along d from the origin o, which offset_origin moved off the surface the ray
      * left, to that surface (offset_back). Hazard: the sliver between lies in the medium the ray
      * enters, and skipping it skips sigma_t * 1e-5 * |p| of optical depth: nothing in fog, but at
      * sigma_t = 1e6 in a unit scene ten mean free paths, so light entering a dense medium first
      * scattered far too deep (a half-space of albedo 0.9 reflected 0.002 instead of 0.46). Media
      * are sampled from the surface on; the ray is still traced from the offset origin. */
-    float t_back = 0.0f;
+    float t_back;
+    int medium;
+    int depth;
+    bool specular;      /* last vertex was delta (or the camera): emission hits get no MIS */
+    float prev_pdf;     /* solid-angle pdf of the direction sampled at the last vertex */
+    float3 prev_p;
+    float eta_scale;
+    bool do_nee;
+} PathState;
+
+/* what a step leaves the path to do next */
+#define PATH_CONTINUE 0     /* trace the ray in ps->o, ps->d */
+#define PATH_END 1
+#define PATH_SURFACE 2      /* nothing happened in the medium: the ray reaches the surface it hit, or escapes */
+#define PATH_CROSSED 3      /* the ray passed a null boundary: trace on, with no roulette */
+
+/* The ray's segment through its medium: equiangular sampling towards point lights, then a free
+ * flight; at a scattering event, next-event estimation against phase sampling and a new
+ * direction from the phase function. */
+inline int path_medium_event(const SceneData *sc, Rng *rng, PathState *ps, bool hit, const Hit *h, uint *cutoffs) {
+#if VOLCL_HAS_MEDIA
+    __global const RenderParams *rp = sc->params;
+    if (ps->medium < 0) return PATH_SURFACE;
+    __global const Medium *m = &sc->media[ps->medium];
+    /* the segment starts at the surface the ray left, t_back behind the offset origin */
+    float3 seg_o = ps->o - ps->t_back * ps->d;
+    float seg_t = (hit ? h->t : ps->t_max) + ps->t_back;
+#if VOLCL_HAS_EQUIANGULAR
+    EquiangularSegmentState es = equiangular_begin(sc, rng, m, seg_o, ps->d, seg_t, ps->beta, ps->depth, ps->do_nee);
+    ps->L += ps->beta * equiangular_direct(sc, rng, &es, m, ps->medium, cutoffs);
+#endif
+    MediumSample ms = medium_sample(sc, m, seg_o, ps->d, seg_t, ps->beta, rng, cutoffs);
+#if VOLCL_HAS_EMISSIVE_MEDIA
+    ps->L += ps->beta * ms.emission;
+#endif
+    ps->beta *= ms.weight;
+#if VOLCL_HAS_GRID_MEDIA
+    /* null collisions left no weight, or tracking was cut off (counted): nothing more to carry */
+    if (!ms.scattered && max_component(ps->beta) <= 0.0f) return PATH_END;
+#endif
+    if (!ms.scattered) return PATH_SURFACE;
+    float3 p = ps->o + (ms.t - ps->t_back) * ps->d;
+    if (rp->max_depth >= 0 && ps->depth + 1 >= rp->max_depth) return PATH_END;
+    if (max_component(ps->beta) <= 0.0f) return PATH_END;
+    /* next-event estimation, MIS against phase sampling */
+    if (ps->do_nee) {
+        LightSample ls;
+        float u_pick = rng_next_float(rng);
+        float2 ul = rng_next_float2(rng);
+        if (light_sample(sc, p, u_pick, ul, &ls) && max_component(ls.value) > 0.0f) {
+            float ph = phase_eval(m, ps->d, ls.wi);
+            float3 c = nee_contribution(sc, &ls, (float3)(ph), ph, p, ps->medium, rng, cutoffs);
+#if VOLCL_HAS_EQUIANGULAR
+            c *= equiangular_distance_weight(sc, &es, m, &ls, ms.t);
+#endif
+            ps->L += ps->beta * c;
+        }
+    }
+    float3 nd;
+    ps->prev_pdf = phase_sample(m, ps->d, rng_next_float2(rng), &nd);
+    ps->specular = false;
+    ps->prev_p = p;
+    ps->o = p;
+    ps->d = nd;
+    ps->t_max = INFINITY;
+    ps->t_back = 0.0f;
+    ++ps->depth;
+    return PATH_CONTINUE;
+#else
+    return PATH_SURFACE;
+#endif
+}
+
+/* The ray left the scene: the environment's light, weighted by MIS against light sampling. */
+inline void path_escape(const SceneData *sc, PathState *ps) {
+#if VOLCL_HAS_ENV_LIGHTS
+    __global const RenderParams *rp = sc->params;
+    if (rp->env_light >= 0 && !(rp->hide_emitters && ps->depth == 0)) {
+        float w = ps->specular ? 1.0f : hit_weight(rp, ps->prev_pdf, light_env_pdf(sc));
+        ps->L += ps->beta * vload_f3(sc->lights[rp->env_light].value) * w;
+    }
+#endif
+}
+
+/* A bare (null) boundary: the ray goes on unchanged, possibly into another medium. */
+inline void path_null_crossing(const SceneData *sc, PathState *ps, const SurfacePoint *s) {
+    ps->medium = medium_after(sc, s, ps->d, ps->medium);
+    float3 next = offset_origin(s->p, s->mag, s->ng, ps->d);
+    if (ps->t_max < INFINITY) ps->t_max = fmax(ps->t_max - dot(next - ps->o, ps->d), 0.0f);
+    ps->t_back = offset_back(next, s->p, s->ng, ps->d);
+    ps->o = next;
+}
+
+/* Next-event estimation at a surface vertex, MIS against BSDF sampling. Delta BSDFs draw the same
+ * random numbers without using them, so the sequence stays aligned whatever the vertex type. */
+inline void path_surface_nee(const SceneData *sc, Rng *rng, PathState *ps, const SurfacePoint *s,
+                             __global const Bsdf *bsdf, float3 wo, float3 ss, float3 ts, bool delta, uint *cutoffs) {
+    if (ps->do_nee && !delta) {
+        LightSample ls;
+        float u_pick = rng_next_float(rng);
+        float2 ul = rng_next_float2(rng);
+        if (light_sample(sc, s->p, u_pick, ul, &ls) && max_component(ls.value) > 0.0f) {
+            float pdf;
+            float3 f = bsdf_eval(bsdf, wo, frame_to_local(ls.wi, ss, ts, s->ns), &pdf);
+            if (max_component(f) > 0.0f) {
+                ps->L += ps->beta * nee_contribution(sc, &ls, f, pdf, offset_origin(s->p, s->mag, s->ng, ls.wi),
+                                                     medium_after(sc, s, ls.wi, ps->medium), rng, cutoffs);
+            }
+        }
+    } else {
+        rng_next_float(rng);
+        rng_next_float2(rng);
+    }
+}
+
+/* The ray reached a surface (or escaped): emission found by the last sampled direction, then a
+ * null crossing, or a scattering vertex with next-event estimation and a BSDF-sampled direction. */
+inline int path_surface_event(const SceneData *sc, Rng *rng, PathState *ps, bool hit, const Hit *h, uint *cutoffs) {
+    __global const RenderParams *rp = sc->params;
+    if (!hit) {
+        path_escape(sc, ps);
+        return PATH_END;
+    }
+    SurfacePoint s = surface_point(sc, h, ps->o, ps->d);
+    __global const ShapeInfo *shape = &sc->shapes[s.shape];
+    float3 wo_world = -ps->d;
+#if VOLCL_HAS_AREA_LIGHTS
+    if (shape->light >= 0 && !(rp->hide_emitters && ps->depth == 0)) {
+        float3 le = light_area_emission(&sc->lights[shape->light], s.ns, wo_world);
+        if (max_component(le) > 0.0f) {
+            float w = ps->specular ? 1.0f
+                                   : hit_weight(rp, ps->prev_pdf,
+                                                light_area_pdf(sc, shape->light, ps->prev_p, s.p, s.ng));
+            ps->L += ps->beta * le * w;
+        }
+    }
+#endif
+    __global const Bsdf *bsdf = &sc->bsdfs[shape->bsdf];
+#if VOLCL_HAS_NULL_BSDF
+    if (bsdf->type == BSDF_NULL) {
+        path_null_crossing(sc, ps, &s);
+        return PATH_CROSSED;
+    }
+#endif
+    if (rp->max_depth >= 0 && ps->depth + 1 >= rp->max_depth) return PATH_END;
+
+    float3 ss, ts;
+    make_frame(s.ns, &ss, &ts);
+    float3 wo = frame_to_local(wo_world, ss, ts, s.ns);
+    bool delta = bsdf_is_delta(bsdf);
+    path_surface_nee(sc, rng, ps, &s, bsdf, wo, ss, ts, delta, cutoffs);
+    if (rp->specular_chains_only && !delta) return PATH_END;
+
+    BsdfSample bs;
+    float u1 = rng_next_float(rng);
+    if (!bsdf_sample(bsdf, wo, u1, rng_next_float2(rng), &bs)) return PATH_END;
+    float3 wi = frame_to_world(bs.wi, ss, ts, s.ns);
+    /* a shading normal can send the sampled direction below the geometric surface; the ray
+     * would then start on the wrong side, so such a path ends */
+    if (dot(wi, s.ng) * dot(bs.wi.z >= 0.0f ? s.ns : -s.ns, s.ng) < 0.0f) return PATH_END;
+    ps->beta *= bs.weight;
+    ps->eta_scale *= bs.eta * bs.eta;
+    ps->specular = bs.delta;
+    ps->prev_pdf = bs.pdf;
+    ps->prev_p = s.p;
+    ps->medium = medium_after(sc, &s, wi, ps->medium);
+    ps->o = offset_origin(s.p, s.mag, s.ng, wi);
+    ps->t_back = offset_back(ps->o, s.p, s.ng, wi);
+    ps->d = wi;
+    ps->t_max = INFINITY;
+    ++ps->depth;
+    return PATH_CONTINUE;
+}
+
+/* Russian roulette from rr_depth on: survival follows the throughput (undoing refraction's
+ * 1/eta^2), capped so paths end even when the albedo is exactly 1. False: the path ends. */
+inline bool path_roulette(const SceneData *sc, Rng *rng, PathState *ps) {
+    if (max_component(ps->beta) <= 0.0f) return false;
+    if (ps->depth >= sc->params->rr_depth) {
+        float q = fmin(max_component(ps->beta) * ps->eta_scale, 0.95f);
+        if (rng_next_float(rng) >= q) return false;
+        ps->beta /= q;
+    }
+    return true;
+}
+
+/* Radiance arriving at o from direction -d. *cutoffs counts segments whose tracking hit its bound.
+ * Each step traces the ray, lets the medium act on its segment (path_medium_event) and, where the
+ * ray gets through, the surface it reaches (path_surface_event). */
+inline float3 integrator_radiance(const SceneData *sc, Rng *rng, float3 o, float3 d, float t_max, uint *cutoffs) {
+    __global const RenderParams *rp = sc->params;
+    PathState ps;
+    ps.L = (float3)(0.0f);
+    ps.beta = (float3)(1.0f);
+    ps.depth = 0;
+    ps.medium = camera_start_medium(sc, &o, d, &t_max, rp->camera_medium);
+    ps.o = o;
+    ps.d = d;
+    ps.t_max = t_max;
+    ps.specular = true;
+    ps.prev_pdf = 0.0f;
+    ps.prev_p = o;
+    ps.eta_scale = 1.0f;
+    ps.do_nee = rp->light_count > 0 && rp->nee;
+    ps.t_back = 0.0f;
 
     for (int step = 0; step < VOLCL_MAX_STEPS; ++step) {
         Hit h;
-        bool hit = bvh_trace(sc, o, d, t_max, TRACE_CLOSEST, &h);
-        bool medium_vertex = false;
-
-#if VOLCL_HAS_MEDIA
-        if (medium >= 0) {
-            __global const Medium *m = &sc->media[medium];
-            /* the segment starts at the surface the ray left, t_back behind the offset origin */
-            float3 seg_o = o - t_back * d;
-            float seg_t = (hit ? h.t : t_max) + t_back;
-#if VOLCL_HAS_EQUIANGULAR
-            EquiangularSegmentState es = equiangular_begin(sc, rng, m, seg_o, d, seg_t, beta, depth, do_nee);
-            L += beta * equiangular_direct(sc, rng, &es, m, medium, cutoffs);
-#endif
-            MediumSample ms = medium_sample(sc, m, seg_o, d, seg_t, beta, rng, cutoffs);
-#if VOLCL_HAS_EMISSIVE_MEDIA
-            L += beta * ms.emission;
-#endif
-            beta *= ms.weight;
-#if VOLCL_HAS_GRID_MEDIA
-            /* null collisions left no weight, or tracking was cut off (counted): nothing more to carry */
-            if (!ms.scattered && max_component(beta) <= 0.0f) break;
-#endif
-            if (ms.scattered) {
-                float3 p = o + (ms.t - t_back) * d;
-                if (rp->max_depth >= 0 && depth + 1 >= rp->max_depth) break;
-                if (max_component(beta) <= 0.0f) break;
-                /* next-event estimation, MIS against phase sampling */
-                if (do_nee) {
-                    LightSample ls;
-                    float u_pick = rng_next_float(rng);
-                    float2 ul = rng_next_float2(rng);
-                    if (light_sample(sc, p, u_pick, ul, &ls) && max_component(ls.value) > 0.0f) {
-                        float ph = phase_eval(m, d, ls.wi);
-                        float3 c = nee_contribution(sc, &ls, (float3)(ph), ph, p, medium, rng, cutoffs);
-#if VOLCL_HAS_EQUIANGULAR
-                        c *= equiangular_distance_weight(sc, &es, m, &ls, ms.t);
-#endif
-                        L += beta * c;
-                    }
-                }
-                float3 nd;
-                prev_pdf = phase_sample(m, d, rng_next_float2(rng), &nd);
-                specular = false;
-                prev_p = p;
-                o = p;
-                d = nd;
-                t_max = INFINITY;
-                t_back = 0.0f;
-                ++depth;
-                medium_vertex = true;
-            }
-        }
-#endif
-        if (!medium_vertex) {      /* the ray reached a surface, or escaped */
-            if (!hit) {
-#if VOLCL_HAS_ENV_LIGHTS
-                if (rp->env_light >= 0 && !(rp->hide_emitters && depth == 0)) {
-                    float w = specular ? 1.0f : hit_weight(rp, prev_pdf, light_env_pdf(sc));
-                    L += beta * vload_f3(sc->lights[rp->env_light].value) * w;
-                }
-#endif
-                break;
-            }
-            {
-                SurfacePoint s = surface_point(sc, &h, o, d);
-                __global const ShapeInfo *shape = &sc->shapes[s.shape];
-                float3 wo_world = -d;
-#if VOLCL_HAS_AREA_LIGHTS
-                if (shape->light >= 0 && !(rp->hide_emitters && depth == 0)) {
-                    float3 le = light_area_emission(&sc->lights[shape->light], s.ns, wo_world);
-                    if (max_component(le) > 0.0f) {
-                        float w = specular ? 1.0f
-                                           : hit_weight(rp, prev_pdf,
-                                                        light_area_pdf(sc, shape->light, prev_p, s.p, s.ng));
-                        L += beta * le * w;
-                    }
-                }
-#endif
-                __global const Bsdf *bsdf = &sc->bsdfs[shape->bsdf];
-#if VOLCL_HAS_NULL_BSDF
-                if (bsdf->type == BSDF_NULL) {
-                    /* a bare boundary: the ray goes on unchanged, possibly into another medium */
-                    medium = medium_after(sc, &s, d, medium);
-                    float3 next = offset_origin(s.p, s.mag, s.ng, d);
-                    if (t_max < INFINITY) t_max = fmax(t_max - dot(next - o, d), 0.0f);
-                    t_back = offset_back(next, s.p, s.ng, d);
-                    o = next;
-                    continue;
-                }
-#endif
-                if (rp->max_depth >= 0 && depth + 1 >= rp->max_depth) break;
-
-                float3 ss, ts;
-                make_frame(s.ns, &ss, &ts);
-                float3 wo = frame_to_local(wo_world, ss, ts, s.ns);
-                bool delta = bsdf_is_delta(bsdf);
-
-                if (do_nee && !delta) {
-                    LightSample ls;
-                    float u_pick = rng_next_float(rng);
-                    float2 ul = rng_next_float2(rng);
-                    if (light_sample(sc, s.p, u_pick, ul, &ls) && max_component(ls.value) > 0.0f) {
-                        float pdf;
-                        float3 f = bsdf_eval(bsdf, wo, frame_to_local(ls.wi, ss, ts, s.ns), &pdf);
-                        if (max_component(f) > 0.0f) {
-                            L += beta * nee_contribution(sc, &ls, f, pdf, offset_origin(s.p, s.mag, s.ng, ls.wi),
-                                                         medium_after(sc, &s, ls.wi, medium), rng, cutoffs);
-                        }
-                    }
-                } else {
-                    /* keep the random-number sequence aligned whatever the vertex type */
-                    rng_next_float(rng);
-                    rng_next_float2(rng);
-                }
-                if (rp->specular_chains_only && !delta) break;
-
-                BsdfSample bs;
-                float u1 = rng_next_float(rng);
-                if (!bsdf_sample(bsdf, wo, u1, rng_next_float2(rng), &bs)) break;
-                float3 wi = frame_to_world(bs.wi, ss, ts, s.ns);
-                /* a shading normal can send the sampled direction below the geometric surface; the ray
-                 * would then start on the wrong side, so such a path ends */
-                if (dot(wi, s.ng) * dot(bs.wi.z >= 0.0f ? s.ns : -s.ns, s.ng) < 0.0f) break;
-                beta *= bs.weight;
-                eta_scale *= bs.eta * bs.eta;
-                specular = bs.delta;
-                prev_pdf = bs.pdf;
-                prev_p = s.p;
-                medium = medium_after(sc, &s, wi, medium);
-                o = offset_origin(s.p, s.mag, s.ng, wi);
-                t_back = offset_back(o, s.p, s.ng, wi);
-                d = wi;
-                t_max = INFINITY;
-                ++depth;
-            }
-        }
-        if (max_component(beta) <= 0.0f) break;
-        if (depth >= rp->rr_depth) {
-            /* survival follows the throughput (undoing refraction's 1/eta^2), capped so paths end even
-             * when the albedo is exactly 1 */
-            float q = fmin(max_component(beta) * eta_scale, 0.95f);
-            if (rng_next_float(rng) >= q) break;
-            beta /= q;
-        }
+        bool hit = bvh_trace(sc, ps.o, ps.d, ps.t_max, TRACE_CLOSEST, &h);
+        int next = path_medium_event(sc, rng, &ps, hit, &h, cutoffs);
+        if (next == PATH_SURFACE) next = path_surface_event(sc, rng, &ps, hit, &h, cutoffs);
+        if (next == PATH_END) break;
+        if (next == PATH_CROSSED) continue;
+        if (!path_roulette(sc, rng, &ps)) break;
     }
-    return L;
+    return ps.L;
 }
 
 #endif

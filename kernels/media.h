@@ -128,6 +128,65 @@ inline float3 medium_grid_albedo(const SceneData *sc, __global const Medium *m, 
 /* Exponential optical depth to the next tentative collision (u < 1, so always finite). */
 inline float medium_sample_tau(Rng *rng) { return -log1p(-rng_next_float(rng)); }
 
+/* The majorant walk both trackers share: tentative collisions along a segment through an extinction
+ * grid, drawn from the piecewise-constant majorant of the cells the ray crosses (grid.h). The
+ * optical depth left over at a cell's end carries into the next cell (the exponential is
+ * memoryless), and every step (a cell entered or a tentative collision) counts towards
+ * VOLCL_MAX_TRACKING_STEPS. */
+typedef struct {
+    GridWalk walk;
+    float ta, tb, mu;   /* the current cell's span and its (scaled) majorant */
+    float tau;          /* optical depth to the next tentative collision */
+    float maj_scale;
+    int steps;
+    bool in_cell;
+} MajorantWalk;
+
+#define MAJORANT_END 0          /* the segment ends before the next tentative collision */
+#define MAJORANT_COLLISION 1
+#define MAJORANT_CUTOFF 2       /* the step bound was hit (count it: the estimate is cut short) */
+
+/* Start a walk of grid v along o + t d, t in [0, t_max]; false when the segment misses the grid. */
+inline bool majorant_walk_begin(const SceneData *sc, __global const GridVolume *v, float3 o, float3 d, float t_max,
+                                Rng *rng, MajorantWalk *w) {
+    float3 ol = grid_point_to_local(v, o), dl = grid_dir_to_local(v, d);
+    float t0, t1;
+    if (!grid_clip(ol, dl, t_max, &t0, &t1)) return false;
+    w->walk = grid_walk_begin(v, ol, dl, t0, t1);
+    w->maj_scale = sc->params->majorant_scale;
+    w->tau = medium_sample_tau(rng);
+    w->steps = 0;
+    w->in_cell = false;
+    return true;
+}
+
+/* The next tentative collision: its distance *t, the majorant *mu there and the extinction
+ * *sigma_t looked up at it. The optical depth to the one after is drawn before returning, so
+ * the caller's own random numbers come after it. */
+inline int majorant_walk_next(const SceneData *sc, __global const GridVolume *v, MajorantWalk *w, Rng *rng,
+                              float *t, float *mu, float3 *sigma_t) {
+    for (;;) {
+        if (!w->in_cell) {
+            if (!grid_walk_next(&w->walk, sc->grid_data, v, &w->ta, &w->tb, &w->mu)) return MAJORANT_END;
+            w->mu *= w->maj_scale;
+            w->in_cell = true;
+        }
+        if (++w->steps > VOLCL_MAX_TRACKING_STEPS) return MAJORANT_CUTOFF;
+        float span = w->mu * (w->tb - w->ta);
+        if (w->tau >= span) {
+            w->tau -= span;
+            w->in_cell = false;
+            continue;
+        }
+        *t = w->ta + w->tau / w->mu;
+        w->ta = *t;
+        w->tau = medium_sample_tau(rng);
+        *mu = w->mu;
+        *sigma_t = grid_lookup(sc->grid_data, v, w->walk.pe + (*t - w->walk.t0) * w->walk.dl);
+        return MAJORANT_COLLISION;
+    }
+}
+
 inline MediumSample medium_grid_sample_distance(const SceneData *sc, __global const Medium *m, float3 o,
                                                 float3 d, float t_max, float3 beta, Rng *rng,
                                                 uint *cutoffs) {
@@ -137,62 +196,45 @@ inline MediumSample medium_grid_sample_distance(const SceneData *sc, __global co
     ms.weight = (float3)(1.0f);
     ms.emission = (float3)(0.0f);
     __global const GridVolume *v = &sc->grids[m->sigma_t_grid];
-    float3 ol = grid_point_to_local(v, o), dl = grid_dir_to_local(v, d);
-    float t0, t1;
-    if (!grid_clip(ol, dl, t_max, &t0, &t1)) return ms;
-    GridWalk walk = grid_walk_begin(v, ol, dl, t0, t1);
-    float maj_scale = sc->params->majorant_scale;
+    MajorantWalk walk;
+    if (!majorant_walk_begin(sc, v, o, d, t_max, rng, &walk)) return ms;
 #if VOLCL_HAS_EMISSIVE_MEDIA
     float3 le = vload_f3(m->emission);
     bool emits = max_component(le) > 0.0f;
 #endif
     float3 w = (float3)(1.0f);      /* weight of the null collisions so far */
-    float tau = medium_sample_tau(rng);
-    int steps = 0;
-    float ta, tb, mu;
-    while (grid_walk_next(&walk, sc->grid_data, v, &ta, &tb, &mu)) {
-        mu *= maj_scale;
-        for (;;) {
-            if (++steps > VOLCL_MAX_TRACKING_STEPS) {
-                *cutoffs += 1u;
-                ms.weight = (float3)(0.0f);
-                return ms;
-            }
-            /* memoryless: the optical depth left over at the cell's end carries into the next cell */
-            float span = mu * (tb - ta);
-            if (tau >= span) {
-                tau -= span;
-                break;
-            }
-            float t = ta + tau / mu;
-            ta = t;
-            tau = medium_sample_tau(rng);
-            float3 sigma_t = grid_lookup(sc->grid_data, v, walk.pe + (t - walk.t0) * walk.dl);
-            float3 sigma_n = fmax(mu - sigma_t, 0.0f);
-            float3 albedo = (float3)(-1.0f);
+    float t, mu;
+    float3 sigma_t;
+    int event;
+    while ((event = majorant_walk_next(sc, v, &walk, rng, &t, &mu, &sigma_t)) == MAJORANT_COLLISION) {
+        float3 sigma_n = fmax(mu - sigma_t, 0.0f);
+        float3 albedo = (float3)(-1.0f);
 #if VOLCL_HAS_EMISSIVE_MEDIA
-            if (emits) {
-                albedo = medium_grid_albedo(sc, m, o + t * d);
-                ms.emission += w * sigma_t * (1.0f - albedo) * le / mu;
-            }
-#endif
-            float3 p = medium_channel_probs(beta * w);
-            float pt = dot(p, sigma_t), pn = dot(p, sigma_n);
-            /* pn = 0 only where sigma_t reaches the majorant in every carried channel (then the
-             * collision is real for sure); the test keeps rounding from dividing by it */
-            if (rng_next_float(rng) * (pt + pn) < pt || !(pn > 0.0f)) {
-                if (albedo.x < 0.0f) albedo = medium_grid_albedo(sc, m, o + t * d);
-                ms.t = t;
-                ms.scattered = true;
-                ms.weight = pt > 0.0f ? w * albedo * sigma_t * ((pt + pn) / (mu * pt)) : (float3)(0.0f);
-                return ms;
-            }
-            w *= sigma_n * ((pt + pn) / (mu * pn));
-            if (!(max_component(w) > 0.0f)) {
-                ms.weight = (float3)(0.0f);
-                return ms;
-            }
+        if (emits) {
+            albedo = medium_grid_albedo(sc, m, o + t * d);
+            ms.emission += w * sigma_t * (1.0f - albedo) * le / mu;
         }
+#endif
+        float3 p = medium_channel_probs(beta * w);
+        float pt = dot(p, sigma_t), pn = dot(p, sigma_n);
+        /* pn = 0 only where sigma_t reaches the majorant in every carried channel (then the
+         * collision is real for sure); the test keeps rounding from dividing by it */
+        if (rng_next_float(rng) * (pt + pn) < pt || !(pn > 0.0f)) {
+            if (albedo.x < 0.0f) albedo = medium_grid_albedo(sc, m, o + t * d);
+            ms.t = t;
+            ms.scattered = true;
+            ms.weight = pt > 0.0f ? w * albedo * sigma_t * ((pt + pn) / (mu * pt)) : (float3)(0.0f);
+            return ms;
+        }
+        w *= sigma_n * ((pt + pn) / (mu * pn));
+        if (!(max_component(w) > 0.0f)) {
+            ms.weight = (float3)(0.0f);
+            return ms;
+        }
+    }
+    if (event == MAJORANT_CUTOFF) {
+        *cutoffs += 1u;
+        w = (float3)(0.0f);
     }
     ms.weight = w;
     return ms;
@@ -204,38 +246,23 @@ inline MediumSample medium_grid_sample_distance(const SceneData *sc, __global co
 inline float3 medium_grid_transmittance(const SceneData *sc, __global const Medium *m, float3 o, float3 d,
                                         float t_max, float3 tr, Rng *rng, uint *cutoffs) {
     __global const GridVolume *v = &sc->grids[m->sigma_t_grid];
-    float3 ol = grid_point_to_local(v, o), dl = grid_dir_to_local(v, d);
-    float t0, t1;
-    if (!grid_clip(ol, dl, t_max, &t0, &t1)) return tr;
-    GridWalk walk = grid_walk_begin(v, ol, dl, t0, t1);
-    float maj_scale = sc->params->majorant_scale;
-    float tau = medium_sample_tau(rng);
-    int steps = 0;
-    float ta, tb, mu;
-    while (grid_walk_next(&walk, sc->grid_data, v, &ta, &tb, &mu)) {
-        mu *= maj_scale;
-        for (;;) {
-            if (++steps > VOLCL_MAX_TRACKING_STEPS) {
-                *cutoffs += 1u;
-                return (float3)(0.0f);
-            }
-            float span = mu * (tb - ta);
-            if (tau >= span) {
-                tau -= span;
-                break;
-            }
-            float t = ta + tau / mu;
-            ta = t;
-            tau = medium_sample_tau(rng);
-            float3 sigma_t = grid_lookup(sc->grid_data, v, walk.pe + (t - walk.t0) * walk.dl);
-            tr *= fmax(mu - sigma_t, 0.0f) / mu;
-            float t_big = max_component(tr);
-            if (t_big < VOLCL_RR_TRANSMITTANCE) {
-                float q = t_big / VOLCL_RR_TRANSMITTANCE;
-                if (!(rng_next_float(rng) < q)) return (float3)(0.0f);
-                tr /= q;
-            }
+    MajorantWalk walk;
+    if (!majorant_walk_begin(sc, v, o, d, t_max, rng, &walk)) return tr;
+    float t, mu;
+    float3 sigma_t;
+    int event;
+    while ((event = majorant_walk_next(sc, v, &walk, rng, &t, &mu, &sigma_t)) == MAJORANT_COLLISION) {
+        tr *= fmax(mu - sigma_t, 0.0f) / mu;
+        float t_big = max_component(tr);
+        if (t_big < VOLCL_RR_TRANSMITTANCE) {
+            float q = t_big / VOLCL_RR_TRANSMITTANCE;
+            if (!(rng_next_float(rng) < q)) return (float3)(0.0f);
+            tr /= q;
         }
+    }
+    if (event == MAJORANT_CUTOFF) {
+        *cutoffs += 1u;
+        return (float3)(0.0f);
     }
     return tr;
 }

@@ -1,10 +1,15 @@
-/* Entry point: one launch renders one sample (or one slot of samples) for a range of pixels.
+/* Entry point: one launch renders one sample (or one slot of samples) for a range of pixels of a
+ * tile.
  *
- * Work item i handles pixel first_pixel + (i % pixel_count) and sample index
- * sample_base + i / pixel_count, writing its own accumulator slot, so tiny images still fill the
- * device and the result never depends on how samples were grouped into launches. Samples that come
- * out NaN, infinite or negative are counted and left out of the sums instead of poisoning them, and
- * medium segments whose tracking hit its step bound are counted in `cutoffs` (see media.h).
+ * A tile is the rectangle of the image tile_w pixels wide whose top left pixel is (tile_x, tile_y),
+ * its tile_pixels pixels numbered row by row; the whole image is the tile (0, 0, width, height).
+ * The accumulators hold `slots` rows of tile_pixels entries. Work item i handles tile pixel
+ * first + (i % count) and sample index sample_base + i / count, writing its own accumulator slot,
+ * so tiny images still fill the device and the result never depends on how samples were grouped
+ * into launches. Random streams and camera rays follow the pixel's place in the image, not in the
+ * tile, so a pixel's samples are the same whatever tile renders it. Samples that come out NaN,
+ * infinite or negative are counted and left out of the sums instead of poisoning them, and medium
+ * segments whose tracking hit its step bound are counted in `cutoffs` (see media.h).
  */
 #include "types.h"
 #include "common.h"
@@ -32,21 +37,23 @@ __kernel void render_pass(__global const BvhWideNode *nodes, __global const Leaf
                           __global const float *filter_table,
                           __global float4 *sums, __global float4 *sums_sq, __global uint *invalid,
                           __global uint *cutoffs,
-                          uint sample_base, int first_pixel, int pixel_count, int slots) {
+                          uint sample_base, int tile_x, int tile_y, int tile_w, int tile_pixels,
+                          int first, int count, int slots) {
     int gid = get_global_id(0);
-    if (gid >= pixel_count * slots) return;
-    int slot = gid / pixel_count;
-    int pixel = first_pixel + gid % pixel_count;
+    if (gid >= count * slots) return;
+    int slot = gid / count;
+    int tp = first + gid % count;    /* the pixel's index in the tile */
+    int px = tile_x + tp % tile_w, py = tile_y + tp / tile_w;
+    int pixel = py * params->width + px;
     SceneData sc = {nodes, leaves, triangles, normals, spheres, shapes, bsdfs, lights,
                     light_tri_cdf, light_tris, media, grids, grid_data, params};
-    int width = params->width;
     Rng rng = rng_init(params->seed, (uint)pixel, sample_base + (uint)slot);
     float3 o, d;
     float t_max;
-    camera_ray(&sc, filter_table, pixel % width, pixel / width, rng_next_float2(&rng), &o, &d, &t_max);
+    camera_ray(&sc, filter_table, px, py, rng_next_float2(&rng), &o, &d, &t_max);
     uint cut = 0u;
     float3 L = integrator_radiance(&sc, &rng, o, d, t_max, &cut);
-    int out = slot * (params->width * params->height) + pixel;
+    int out = slot * tile_pixels + tp;
     if (cut) cutoffs[out] += cut;
     if (isfinite(L.x) && isfinite(L.y) && isfinite(L.z) && L.x >= 0.0f && L.y >= 0.0f && L.z >= 0.0f) {
         sums[out] += (float4)(L, 1.0f);

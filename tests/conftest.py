@@ -12,7 +12,6 @@ if str(ROOT) not in sys.path:
 from volcl import device as devmod  # noqa: E402
 from volcl.device import cl  # noqa: E402
 from volcl.features import all_features  # noqa: E402
-from volcl.program import build_program  # noqa: E402
 
 TEST_KERNELS = Path(__file__).resolve().parent / "kernels"
 
@@ -25,17 +24,16 @@ def device():
 
 @pytest.fixture(scope="session")
 def cl_env(device):
-    ctx = cl.Context([device.device])
-    return ctx, cl.CommandQueue(ctx)
+    """The device's own context and queue (volcl.device.Device), which renders share."""
+    return device.ctx, device.queue
 
 
 @pytest.fixture(scope="session")
-def test_program(cl_env):
-    """Builds tests/kernels/<name> with every feature on (so every routine exists)."""
-    ctx, _ = cl_env
-
+def test_program(device):
+    """Builds tests/kernels/<name> with every feature on (so every routine exists), once per
+    session: the device's program cache keeps it."""
     def build(name, features=None):
-        return build_program(ctx, features or all_features(), TEST_KERNELS / name)
+        return device.program(features or all_features(), TEST_KERNELS / name)
     return build
 
 

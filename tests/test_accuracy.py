@@ -15,7 +15,7 @@ from scipy.stats import t as student_t
 from imagestats import ALPHA, z_limit
 from scenebuild import camera, diffuse, furnace, look_at, medium, quad_mesh, scene
 from volcl.accuracy import relative_mse, relative_rmse, relative_standard_error, time_to_error
-from volcl.render import Renderer
+from volcl.renderer import Renderer
 from volcl.scene.model import Emitter, Shape, rgb
 
 # hypothesis tests made by the calibration checks below, for the Sidak correction

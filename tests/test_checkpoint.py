@@ -7,7 +7,7 @@ import pytest
 
 from volcl import checkpoint
 from volcl.errors import VolclError
-from volcl.render import Renderer
+from volcl.renderer import Renderer
 from volcl.scene import load
 
 ROOT = Path(__file__).resolve().parent.parent

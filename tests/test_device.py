@@ -7,7 +7,7 @@ import pytest
 from scenebuild import furnace
 from volcl import device as devmod
 from volcl.errors import VolclError
-from volcl.render import Renderer
+from volcl.renderer import Renderer
 
 
 def test_unknown_device_selector_lists_what_exists():

@@ -11,7 +11,7 @@ from scenebuild import camera, look_at, medium, scene
 from stats import assert_integrates_to_one, chi2_1d, line_rule
 from volcl.estimator import Estimator
 from volcl.features import detect
-from volcl.render import render
+from volcl.renderer import render
 from volcl.scene.model import Emitter, rgb
 
 SPAN = 1000.0   # EQUIANGULAR_SPAN in kernels/equiangular.h

@@ -10,7 +10,7 @@ from scenebuild import box_mesh, camera, constant_env, diffuse, furnace, medium,
 from volcl.device import cl
 from volcl.features import FLAGS, all_features, defines, detect
 from volcl.program import build_program
-from volcl.render import render
+from volcl.renderer import render
 from volcl.scene import load
 from volcl.scene.model import Bsdf, Emitter, Shape, rgb
 

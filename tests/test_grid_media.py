@@ -11,7 +11,7 @@ from imagestats import z_limit
 from scenebuild import camera, grid, hetero_medium, scene
 from volcl import grids
 from volcl.pack import pack
-from volcl.render import Renderer
+from volcl.renderer import Renderer
 from volcl.scene import transform as tf
 
 PROGRAM = "grid_tests.cl"

@@ -17,7 +17,7 @@ from imagestats import assert_mean_matches, assert_same_image
 from scenebuild import (box_mesh, camera, constant_env, diffuse, furnace, look_at, medium, quad_mesh, scene,
                         sphere)
 from volcl.pack import camera_tangents
-from volcl.render import render
+from volcl.renderer import render
 from volcl.scene import load
 from volcl.scene.model import Bsdf, Emitter, Shape, rgb
 

@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from volcl.render import Renderer
+from volcl.renderer import Renderer
 from volcl.scene import load
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -56,11 +56,11 @@ def test_spp_split_into_calls_is_bit_identical(small, device, reference, calls):
     assert same(res, reference)
 
 
-@pytest.mark.parametrize("tile", [1, 37, 100])
-def test_launch_size_does_not_change_the_image(small, device, reference, tile):
-    r = Renderer(small, device=device, seed=7, tile=tile)
+@pytest.mark.parametrize("pixels", [1, 37, 100])
+def test_launch_size_does_not_change_the_image(small, device, reference, pixels):
+    r = Renderer(small, device=device, seed=7, launch_pixels=pixels)
     res = r.render(100)
-    assert r.launches == 3 * -(-24 * 16 // tile)       # 3 passes (42 + 42 + 16 spp), each in tiles
+    assert r.launches == 3 * -(-24 * 16 // pixels)     # 3 passes (42 + 42 + 16 spp), each in launches
     assert same(res, reference)
 
 

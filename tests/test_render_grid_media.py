@@ -7,7 +7,7 @@ import pytest
 from imagestats import assert_images_match, assert_mean_matches
 from scenebuild import (camera, constant_env, cube_to_world, furnace, grid, hetero_medium, look_at, medium,
                         scene, sphere)
-from volcl.render import render
+from volcl.renderer import render
 from volcl.scene import transform as tf
 from volcl.scene.model import Bsdf, Emitter, rgb
 

@@ -9,7 +9,7 @@ import pytest
 from imagestats import assert_mean_matches
 from scenebuild import (box_mesh, camera, constant_env, diffuse, furnace, look_at, medium, quad_mesh, scene,
                         sphere)
-from volcl.render import render
+from volcl.renderer import render
 from volcl.scene import load
 from volcl.scene.model import Bsdf, Shape, rgb
 

@@ -11,7 +11,7 @@ import numpy as np
 
 from imagestats import assert_mean_matches
 from scenebuild import box_mesh, camera, diffuse, look_at, medium, quad_mesh, scene
-from volcl.render import render
+from volcl.renderer import render
 from volcl.scene.model import Bsdf, Shape, rgb
 
 SIGMA, ALBEDO, G, LE = 1.0, 0.95, 0.6, 30.0

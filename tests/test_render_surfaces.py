@@ -7,7 +7,7 @@ import pytest
 from imagestats import assert_mean_matches
 from scenebuild import (box_mesh, camera, constant_env, diffuse, furnace, look_at, quad_mesh, scene,
                         sphere)
-from volcl.render import render
+from volcl.renderer import render
 from volcl.scene.model import Bsdf, Emitter, Shape, rgb
 
 

@@ -21,9 +21,9 @@ import traceback
 from dataclasses import dataclass
 from pathlib import Path
 
-from . import __version__
 from . import checkpoint
 from .errors import VolclError
+from .options import OutputOptions, RenderOptions, SceneOptions
 
 PROGRESS_LINE_SECONDS = 10.0        # progress lines when stderr is not a terminal (logs)
 EXIT_FAILED = 1
@@ -169,34 +169,44 @@ def _already_rendered(out: Path, scene_path, defines: dict, spp: int, scene, see
     return (attrs.get("volcl:complete") == 1 and attrs.get("volcl:spp", 0) >= spp
             and attrs.get("volcl:scene_sha256") == checkpoint.file_sha256(scene_path)
             and attrs.get("volcl:defines") == checkpoint.defines_key(defines)
-            and pixels.shape[:2] == (scene.camera.height, scene.camera.width)
+            and pixels.shape[:2] == (scene.height, scene.width)
             and (seed is None or attrs.get("volcl:seed") == seed & 0xFFFFFFFF))
 
 
-def render_job(job: Job, opts, device, stop: StopRequest, load_scene, defines, features):
+def load_scene(path, options: SceneOptions):
+    """The volcl.Scene of a scene file, its warnings printed."""
+    from .api import prepare
+    from .scene import load
+    model = load(path, options.defines)
+    return prepare(model, path, options.defines, options.width, options.height,
+                   warn=lambda w: print(f"warning: {w}", file=sys.stderr))
+
+
+def render_job(job: Job, device, stop: StopRequest, scene_options: SceneOptions, render: RenderOptions,
+               output: OutputOptions):
     """Render one scene into job.output, updating job. Raises VolclError for what a user can fix."""
     from .image import check_writable, write_image
-    from .render import Renderer
+    from .renderer import Renderer
     out = check_writable(job.output)
-    scene = load_scene(job.scene)
+    scene = load_scene(job.scene, scene_options)
+    defines = scene_options.defines
     # --spp caps --time-limit and --target-error; without any of the three, the scene's spp applies
-    time_limit, target_error = getattr(opts, "time_limit", None), getattr(opts, "target_error", None)
-    spp = opts.spp or (None if time_limit or target_error else scene.spp)
-    estimator = getattr(opts, "estimator", None)
-    if estimator is not None and not estimator.nee and any(e.kind in ("point", "directional") for e in scene.emitters):
+    spp = render.spp or (None if render.time_limit or render.target_error else scene.spp)
+    estimator = render.estimator
+    if not estimator.nee and any(e.kind in ("point", "directional") for e in scene.model.emitters):
         print(f"volcl: warning: {job.scene}: with --nee off, point and directional lights are never found (no "
               "path can hit them)", file=sys.stderr)
     ckpt = checkpoint.path_for(out)
     state = meta = None
-    if opts.resume:
+    if output.resume:
         if ckpt.is_file():
             state, meta = checkpoint.load(ckpt)
-        elif spp is not None and _already_rendered(out, job.scene, defines, spp, scene, opts.seed):
+        elif spp is not None and _already_rendered(out, job.scene, defines, spp, scene, render.seed):
             job.status, job.spp = "done earlier, kept", spp
             print(f"{out}: already rendered with {spp} spp or more; kept", flush=True)
             return
-    seed = opts.seed if opts.seed is not None else (meta["seed"] if meta else None)
-    renderer = Renderer(scene, device=device, features=features, seed=seed, estimator=estimator)
+    seed = render.seed if render.seed is not None else (meta["seed"] if meta else None)
+    renderer = Renderer(scene, device=device, features=render.features, seed=seed, estimator=estimator)
     ident = checkpoint.identity(renderer, job.scene, defines)
     if state is not None:
         checkpoint.check(ckpt, meta, ident, renderer.seed)
@@ -205,17 +215,21 @@ def render_job(job: Job, opts, device, stop: StopRequest, load_scene, defines, f
     elif ckpt.is_file():
         print(f"volcl: warning: {ckpt} exists and is ignored (--resume continues from it); it will be "
               "replaced", file=sys.stderr)
-    if opts.verbose:
-        build = (f"kernel build {renderer.build_seconds:.2f} s (the first of this kernel version and feature set "
-                 f"on this machine)" if renderer.build_was_cold else
-                 f"kernel build {renderer.build_seconds:.2f} s from the caches (the first build here took "
-                 f"{renderer.cold_build_seconds:.2f} s)")
+    if output.verbose:
+        if not renderer.built:
+            build = "kernel program reused (built earlier in this run)"
+        elif renderer.build_was_cold:
+            build = (f"kernel build {renderer.build_seconds:.2f} s (the first of this kernel version and feature "
+                     f"set on this machine)")
+        else:
+            build = (f"kernel build {renderer.build_seconds:.2f} s from the caches (the first build here took "
+                     f"{renderer.cold_build_seconds:.2f} s)")
         print(f"{job.scene}: {renderer.packed.triangle_count} triangles, {renderer.packed.sphere_count} spheres, "
               f"BVH {renderer.packed.bvh_seconds:.2f} s, {build}", file=sys.stderr)
     if stop.requested:          # a signal came while the scene loaded or the kernel built
         return
     resumed_at = renderer.samples_done
-    interval = opts.checkpoint_every * 60.0 if opts.checkpoint_every else None
+    interval = output.checkpoint_every * 60.0 if output.checkpoint_every else None
     extra = {"spp_requested": spp or 0}
     last_save = time.monotonic()
 
@@ -226,26 +240,20 @@ def render_job(job: Job, opts, device, stop: StopRequest, load_scene, defines, f
             last_save = time.monotonic()
         return stop.requested
 
-    progress = Progress(Path(job.scene).name, renderer.samples_done, spp, opts.quiet)
+    progress = Progress(Path(job.scene).name, renderer.samples_done, spp, output.quiet)
     try:
         result = renderer.render(None if spp is None else max(spp - renderer.samples_done, 0),
-                                 progress=progress.update, stop=after_pass, time_limit=time_limit,
-                                 target_error=target_error, min_spp=getattr(opts, "min_spp", 16))
+                                 progress=progress.update, stop=after_pass, time_limit=render.time_limit,
+                                 target_error=render.target_error, min_spp=render.min_spp)
     finally:
         progress.close()
-    complete = result.stop_reason != "stopped" and (spp is None or result.spp >= spp)
-    if interval is not None and (not complete or opts.keep_checkpoint):
+    result.info["spp_requested"] = spp or 0     # the total asked for, across resumed sessions
+    complete = result.complete
+    if interval is not None and (not complete or output.keep_checkpoint):
         checkpoint.save(ckpt, renderer, ident, extra)
-    meta_out = {"scene": str(Path(job.scene).resolve()), "scene_sha256": ident["scene_sha256"],
-                "defines": ident["defines"], "spp": result.spp, "spp_requested": spp or 0, "complete": int(complete),
-                "seed": renderer.seed, "device": result.device, "features": result.stats["features"],
-                "kernel_sha256": ident["kernel_sha256"], "render_seconds": round(result.seconds, 3),
-                "version": __version__, "invalid_samples": result.invalid,
-                "tracking_cutoffs": result.tracking_cutoffs, "rel_error": float(result.rel_error),
-                "stop_reason": result.stop_reason, "estimator": renderer.estimator.describe()}
     layers = {"variance": result.variance} if out.suffix.lower() == ".exr" else None
-    write_image(out, result.image, meta_out, layers)
-    if complete and not opts.keep_checkpoint and ckpt.is_file():
+    write_image(out, result.image, result.metadata, layers)
+    if complete and not output.keep_checkpoint and ckpt.is_file():
         ckpt.unlink()
     job.spp, job.seconds = result.spp, result.seconds
     if complete:
@@ -278,29 +286,33 @@ def print_table(jobs: list[Job], file=sys.stdout):
             print(f"FAILED {j.scene}: {j.error}", file=file)
 
 
-def run(opts, device_selector, load_scene, defines, features) -> int:
-    """Render every scene of opts.scenes; the exit status: 0, EXIT_FAILED if a scene failed, 128 +
-    the signal number if interrupted."""
+def run(scenes: list, device=None, scene_options: SceneOptions | None = None,
+        render: RenderOptions | None = None, output: OutputOptions | None = None) -> int:
+    """Render every scene file of `scenes` on `device` (a volcl.Device, a selector or None); the
+    exit status: 0, EXIT_FAILED if a scene failed, 128 + the signal number if interrupted."""
     from . import device as devmod
-    outs = output_paths(opts.scenes, opts.output, opts.output_dir)
-    if opts.output_dir is not None:
-        Path(opts.output_dir).mkdir(parents=True, exist_ok=True)
-    jobs = [Job(s, o) for s, o in zip(opts.scenes, outs)]
+    scene_options = scene_options or SceneOptions()
+    render = render or RenderOptions()
+    output = output or OutputOptions()
+    outs = output_paths(scenes, output.output, output.output_dir)
+    if output.output_dir is not None:
+        Path(output.output_dir).mkdir(parents=True, exist_ok=True)
+    jobs = [Job(str(s), o) for s, o in zip(scenes, outs)]
     single = len(jobs) == 1
     with StopRequest() as stop:
-        device = devmod.choose(device_selector)
+        dev = devmod.resolve(device)
         for job in jobs:
             if stop.requested:
                 break
             try:
-                render_job(job, opts, device, stop, load_scene, defines, features)
+                render_job(job, dev, stop, scene_options, render, output)
             except Exception as exc:
                 if single:
                     raise
                 job.status = "FAILED"
                 job.error = str(exc) if isinstance(exc, VolclError) else f"{type(exc).__name__}: {exc}"
                 print(f"volcl: error: {job.scene}: {job.error}", file=sys.stderr, flush=True)
-                if opts.verbose and not isinstance(exc, VolclError):
+                if output.verbose and not isinstance(exc, VolclError):
                     traceback.print_exc()
     if not single:
         done = sum(j.status.startswith(("ok", "done earlier")) for j in jobs)

@@ -3,7 +3,7 @@
 A checkpoint holds the raw device accumulators (per-slot float32 sums, sums of squares, invalid
 counts), the samples done and the seed: restored into a Renderer of the same scene, the render
 continues at the same sample index and ends bit-identical to one that never stopped (see
-volcl/render.py). It also holds what makes it belong to one render, the identity: the scene file
+volcl/renderer.py). It also holds what makes it belong to one render, the identity: the scene file
 and its sha256, the -D overrides, a hash of every array the kernel reads, the kernel sources'
 hash and the feature set. A checkpoint whose identity differs from the render asked for is
 refused, never silently mixed in.
@@ -13,7 +13,6 @@ checkpoint is always either the old one or the new one, never half of each.
 """
 from __future__ import annotations
 
-import hashlib
 import io
 import json
 import os
@@ -27,6 +26,7 @@ from . import __version__
 from .errors import VolclError
 from .features import describe
 from .image import new_file_mode
+from .prepared import defines_key, file_sha256  # noqa: F401  (part of this module's interface)
 from .program import sources_hash
 
 FORMAT = 1
@@ -51,14 +51,6 @@ def path_for(output) -> Path:
     """The checkpoint of an output file: beside it, named after it (fog.exr -> fog.exr.checkpoint.npz)."""
     output = Path(output)
     return output.with_name(output.name + SUFFIX)
-
-
-def file_sha256(path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def identity(renderer, scene_path, defines: dict) -> dict:
@@ -133,11 +125,6 @@ def load(path) -> tuple[dict, dict]:
 def _short(value):
     text = repr(value)
     return text[:14] + "...'" if isinstance(value, str) and len(value) == 64 else text
-
-
-def defines_key(defines: dict) -> str:
-    """The -D overrides that change the image (all but spp), as one canonical string."""
-    return json.dumps({k: str(defines[k]) for k in sorted(defines) if k != "spp"})
 
 
 def check(path, meta: dict, ident: dict, seed: int):

@@ -21,19 +21,15 @@ def _defines(items):
     return out
 
 
+def _scene_options(args):
+    from .options import SceneOptions
+    return SceneOptions(defines=_defines(args.define), width=args.width, height=args.height)
+
+
 def _load(path, args):
-    from .scene import load
-    from .scene.model import Scene
-    scene = load(path, _defines(args.define))
-    if not isinstance(scene, Scene):
-        raise VolclError(f"{path} is a Nori test file, not a scene; run it with `volcl test {path}`")
-    if args.width:
-        scene.camera.width = args.width
-    if args.height:
-        scene.camera.height = args.height
-    for w in scene.warnings:
-        print(f"warning: {w}", file=sys.stderr)
-    return scene
+    """The volcl.Scene of a scene file (volcl.batch.load_scene: warnings printed)."""
+    from .batch import load_scene
+    return load_scene(path, _scene_options(args))
 
 
 def _features(args):
@@ -56,26 +52,17 @@ def _estimator(args):
                      equiangular_mis=args.equiangular_mis)
 
 
-def _check_stopping(args):
-    """--spp caps --time-limit and --target-error; with neither of those the scene's own spp applies
-    (volcl.batch)."""
-    if args.time_limit is not None and args.time_limit <= 0:
-        raise VolclError(f"--time-limit {args.time_limit}: expected a positive number of seconds")
-    if args.target_error is not None and not args.target_error > 0:
-        raise VolclError(f"--target-error {args.target_error}: expected a positive relative error, e.g. 0.02")
-
-
 def cmd_render(args):
+    """The command line made into volcl.options, handed to volcl.batch."""
     from . import batch
-    if args.checkpoint_every < 0:
-        raise VolclError("--checkpoint-every: expected minutes >= 0 (0 disables checkpoints)")
-    if args.spp is not None and args.spp < 1:
-        raise VolclError(f"--spp {args.spp}: expected a positive sample count")
-    _check_stopping(args)
-    args.estimator = _estimator(args)
-    defines = _defines(args.define)
-    features = _features(args)
-    return batch.run(args, args.device, lambda path: _load(path, args), defines, features)
+    from .options import OutputOptions, RenderOptions
+    output = OutputOptions(output=args.output and Path(args.output),
+                           output_dir=args.output_dir and Path(args.output_dir),
+                           checkpoint_every=args.checkpoint_every, resume=args.resume,
+                           keep_checkpoint=args.keep_checkpoint, quiet=args.quiet, verbose=args.verbose)
+    render = RenderOptions(spp=args.spp, seed=args.seed, time_limit=args.time_limit, target_error=args.target_error,
+                           min_spp=args.min_spp, estimator=_estimator(args), features=_features(args))
+    return batch.run(args.scenes, args.device, _scene_options(args), render, output)
 
 
 def cmd_devices(args):
@@ -104,11 +91,10 @@ def _grid_text(volume):
 
 
 def cmd_info(args):
-    from .features import FLAGS, describe, detect
-    from .pack import pack
-    scene = _load(args.scene, args)
-    feats = _features(args) or detect(scene)
-    packed = pack(scene, feats)
+    from .features import FLAGS, describe
+    prepared = _load(args.scene, args)
+    scene, packed = prepared.model, prepared.packed
+    feats = _features(args) or prepared.features
     cam = scene.camera
     print(f"scene      {args.scene} ({scene.dialect} dialect)")
     print(f"camera     {cam.width}x{cam.height}, fov {cam.fov:g} ({cam.fov_axis}), filter {cam.rfilter.kind}")
@@ -122,12 +108,9 @@ def cmd_info(args):
     print("flags      " + " ".join(f"VOLCL_HAS_{n}={int(feats[n])}" for n in FLAGS))
     if not args.no_build:
         from . import device as devmod
-        from .device import cl
-        from .program import build_program, build_seconds
         dev = devmod.choose(args.device)
-        ctx = cl.Context([dev.device])
         t0 = time.perf_counter()
-        build_program(ctx, feats)
+        dev.program(feats)
         print(f"build      {time.perf_counter() - t0:.2f} s on {dev.key} {dev.name}")
     return 0
 
@@ -135,7 +118,7 @@ def cmd_info(args):
 def cmd_test(args):
     """Nori's t-test files: each scene's mean radiance against its reference value."""
     from . import device as devmod
-    from .render import Renderer
+    from .renderer import Renderer
     from .scene import load
     from .scene.model import TTest
     test = load(args.file, _defines(args.define))

@@ -25,7 +25,8 @@ import numpy as np
 from .accuracy import relative_mse, time_to_error
 from .errors import VolclError
 from .estimator import CHOICES, Estimator, applicable_choices
-from .render import Renderer
+from .prepared import Scene as PreparedScene
+from .renderer import Renderer
 from .scene.model import Scene
 
 TARGETS = (0.10, 0.03, 0.01)
@@ -160,7 +161,7 @@ def _advance(bar, seconds: float):
 CLOCKS = {"cpu": time.process_time, "wall": time.perf_counter}
 
 
-def converge(scene: Scene, name: str = "scene", reference=None, out=None, max_seconds: float = 20.0,
+def converge(scene: Scene | PreparedScene, name: str = "scene", reference=None, out=None, max_seconds: float = 20.0,
              reference_seconds: float | None = None, choices=None, seed: int = 1, device=None,
              features=None, quiet: bool = False, clock: str = "cpu") -> Report:
     """Measure error against time for each estimator choice; see the module docstring. `reference`:
@@ -174,7 +175,9 @@ def converge(scene: Scene, name: str = "scene", reference=None, out=None, max_se
     from . import device as devmod
     from .image import write_image
 
-    device = device or devmod.choose()
+    device = devmod.resolve(device)
+    prepared = scene if isinstance(scene, PreparedScene) else PreparedScene(scene)
+    scene = prepared.model
     names = list(choices) if choices else applicable_choices(scene)
     unknown = [c for c in names if c not in CHOICES]
     if unknown:
@@ -193,7 +196,7 @@ def converge(scene: Scene, name: str = "scene", reference=None, out=None, max_se
         ref_label = str(reference)
     else:
         bar.set_postfix_str("reference")
-        r = Renderer(scene, device=device, features=features, seed=seed + 1000)
+        r = Renderer(prepared, device=device, features=features, seed=seed + 1000)
         res = r.render(time_limit=ref_seconds, progress=None)
         _advance(bar, res.seconds)
         ref_image, ref_var = res.image, res.variance
@@ -207,7 +210,7 @@ def converge(scene: Scene, name: str = "scene", reference=None, out=None, max_se
 
     renderers, curves = {}, []
     for i, c in enumerate(names):
-        r = Renderer(scene, device=device, features=features, seed=seed + i, estimator=CHOICES[c])
+        r = Renderer(prepared, device=device, features=features, seed=seed + i, estimator=CHOICES[c])
         r.render(1)     # the first launch pays one-time driver costs; keep them out of the timings
         r.reset()
         renderers[c] = r

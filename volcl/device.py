@@ -1,44 +1,50 @@
 """OpenCL devices: listing them, proving volcl's kernels build on them, and choosing one.
 
+A `Device` stands for one OpenCL device and owns what renders on it share: one context, one
+command queue and one ProgramCache. There is one Device object per OpenCL device in a process
+(`list_devices` and `choose` hand out the same objects), so a script that renders in a loop builds
+each program once and never piles up contexts. What belongs to one scene (its buffers) or one
+render (its accumulators, its kernel object) lives in volcl.upload and volcl.renderer, and goes
+when they go.
+
 A device is chosen by proving that a kernel builds on it, never by its name: some drivers list a
 device whose compiler then fails every build.
 """
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
-from pathlib import Path
+import threading
 
 from .errors import VolclError
+from .opencl import cl
+from .program import ENTRY_FILE, ProgramCache, program_key
 
 INSTALL_HINT = ("install an OpenCL driver, e.g. on Debian: apt-get install pocl-opencl-icd "
                 "(and binutils, which PoCL needs to link kernels)")
 
 
-def _prepare_environment():
-    """PoCL caches compiled kernels and fails without a writable cache directory."""
-    if "POCL_CACHE_DIR" not in os.environ:
-        base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
-        cache = base / "volcl" / "pocl"
-        try:
-            cache.mkdir(parents=True, exist_ok=True)
-        except OSError:
-            import tempfile
-            cache = Path(tempfile.gettempdir()) / f"volcl-pocl-{os.getuid()}"
-            cache.mkdir(parents=True, exist_ok=True)
-        os.environ["POCL_CACHE_DIR"] = str(cache)
+class Device:
+    """One OpenCL device, with its context, queue and built programs (created when first needed)."""
 
+    def __init__(self, platform_index: int, device_index: int, device, platform_name: str):
+        self.platform_index = platform_index
+        self.device_index = device_index
+        self.device = device
+        self.platform_name = platform_name
+        self._lock = threading.Lock()
+        self._ctx = None
+        self._queue = None
+        self._programs = None
+        self._check = None          # (ok, why) of the build check, once made
 
-_prepare_environment()
-import pyopencl as cl  # noqa: E402  (needs the environment above)
+    def __repr__(self) -> str:
+        return f"<volcl.Device {self.key} {self.name!r} ({self.kind}, {self.platform_name})>"
 
-
-@dataclass
-class DeviceInfo:
-    platform_index: int
-    device_index: int
-    device: object
-    platform_name: str
+    def fresh(self) -> "Device":
+        """Another Device object for the same OpenCL device, with a context, queue and program cache
+        of its own (and so scene uploads of its own): for a thread that should not share this
+        one's queue. It is not in the list that devices() hands out."""
+        return Device(self.platform_index, self.device_index, self.device, self.platform_name)
 
     @property
     def key(self) -> str:
@@ -49,6 +55,11 @@ class DeviceInfo:
         return self.device.name.strip()
 
     @property
+    def label(self) -> str:
+        """How renders name the device (summaries, EXR metadata): index and name."""
+        return f"{self.key} {self.name}"
+
+    @property
     def kind(self) -> str:
         t = self.device.type
         if t & cl.device_type.GPU:
@@ -57,8 +68,54 @@ class DeviceInfo:
             return "cpu"
         return "accelerator" if t & cl.device_type.ACCELERATOR else "other"
 
+    def _open(self):
+        with self._lock:
+            if self._ctx is None:
+                ctx = cl.Context([self.device])
+                self._queue = cl.CommandQueue(ctx)
+                self._programs = ProgramCache(ctx)
+                self._ctx = ctx
 
-def list_devices() -> list[DeviceInfo]:
+    @property
+    def ctx(self):
+        if self._ctx is None:
+            self._open()
+        return self._ctx
+
+    @property
+    def queue(self):
+        if self._ctx is None:
+            self._open()
+        return self._queue
+
+    @property
+    def programs(self) -> ProgramCache:
+        if self._ctx is None:
+            self._open()
+        return self._programs
+
+    def program(self, features: dict, source_file=ENTRY_FILE, extra: tuple = ()):
+        """The program for this feature set, built on the first request and kept."""
+        return self.programs.get(features, source_file, extra)
+
+    def has_program(self, features: dict, source_file=ENTRY_FILE, extra: tuple = ()) -> bool:
+        return self._programs is not None and program_key(features, source_file, extra) in self._programs
+
+    @property
+    def builds(self) -> int:
+        """Programs built on this device so far in this process."""
+        return 0 if self._programs is None else self._programs.builds
+
+
+# Device objects by OpenCL device, so every listing hands out the same ones.
+_devices: dict = {}
+_devices_lock = threading.Lock()
+
+# The older name of Device.
+DeviceInfo = Device
+
+
+def list_devices() -> list[Device]:
     try:
         platforms = cl.get_platforms()
     except cl.Error:
@@ -69,24 +126,31 @@ def list_devices() -> list[DeviceInfo]:
             devices = p.get_devices()
         except cl.Error:
             continue
-        out.extend(DeviceInfo(pi, di, d, p.name.strip()) for di, d in enumerate(devices))
+        for di, d in enumerate(devices):
+            key = (pi, di, d.int_ptr)
+            with _devices_lock:
+                if key not in _devices:
+                    _devices[key] = Device(pi, di, d, p.name.strip())
+                out.append(_devices[key])
     return out
 
 
-def kernels_build(info: DeviceInfo) -> tuple[bool, str]:
-    """Whether volcl's render kernel (every feature on) builds on this device, and why not."""
-    from .program import build_program
-    from .features import all_features
-    try:
-        ctx = cl.Context([info.device])
-        build_program(ctx, all_features())
-        return True, ""
-    except Exception as exc:  # any driver failure means: not usable
-        text = str(exc).strip().splitlines()
-        return False, text[-1] if text else type(exc).__name__
+def kernels_build(dev: Device) -> tuple[bool, str]:
+    """Whether volcl's render kernel (every feature on) builds on this device, and why not. The
+    answer is kept: a device is checked once per process, and the program built stays in its
+    cache."""
+    if dev._check is None:
+        from .features import all_features
+        try:
+            dev.program(all_features())
+            dev._check = (True, "")
+        except Exception as exc:  # any driver failure means: not usable
+            text = str(exc).strip().splitlines()
+            dev._check = (False, text[-1] if text else type(exc).__name__)
+    return dev._check
 
 
-def _match(devs: list[DeviceInfo], sel: str) -> list[DeviceInfo]:
+def _match(devs: list[Device], sel: str) -> list[Device]:
     sel = sel.strip()
     if sel.lower() in ("cpu", "gpu"):
         return [d for d in devs if d.kind == sel.lower()]
@@ -97,7 +161,7 @@ def _match(devs: list[DeviceInfo], sel: str) -> list[DeviceInfo]:
     return [d for d in devs if sel.lower() in d.name.lower() or sel.lower() in d.platform_name.lower()]
 
 
-def choose(selector: str | None = None) -> DeviceInfo:
+def choose(selector: str | None = None) -> Device:
     """The device to render on: `selector` (or VOLCL_DEVICE) narrows the candidates; among them the
     first whose kernels build wins, GPUs before other devices."""
     selector = selector or os.environ.get("VOLCL_DEVICE") or None
@@ -121,11 +185,21 @@ def choose(selector: str | None = None) -> DeviceInfo:
     raise VolclError("volcl's kernels build on no OpenCL device (" + "; ".join(failures) + f"); {INSTALL_HINT}")
 
 
+def resolve(device=None) -> Device:
+    """A Device from what a caller may pass: a Device, a selector string ('P:D', a name
+    substring, 'cpu', 'gpu'), or None (VOLCL_DEVICE, else the first device whose kernels build)."""
+    if isinstance(device, Device):
+        return device
+    if device is None or isinstance(device, str):
+        return choose(device)
+    raise TypeError(f"device: expected a volcl Device, a selector string or None, not {type(device).__name__}")
+
+
 def _size(n: int) -> str:
     return f"{n / 2**20:.1f} MiB" if n < 2**30 else f"{n / 2**30:.2f} GiB"
 
 
-def check_fits(info: DeviceInfo, buffers: dict[str, int], accumulator_bytes: int = 0) -> None:
+def check_fits(info: Device, buffers: dict[str, int], accumulator_bytes: int = 0) -> None:
     """Raise VolclError when a scene's buffers (name -> bytes) cannot live on the device: one of them
     above its largest single allocation, or all of them (with the image accumulators) above its
     global memory. Checked before anything is uploaded, so the user gets the numbers instead of a

@@ -41,11 +41,12 @@ class Estimator:
             return any(e.kind == "point" for e in scene.emitters) and bool(scene.media)
         return bool((detected or detect(scene))["EQUIANGULAR"])
 
-    def resolve(self, scene: Scene, features: dict | None = None) -> tuple[dict, dict]:
+    def resolve(self, scene: Scene, features: dict | None = None, detected: dict | None = None) -> tuple[dict, dict]:
         """(feature flags to compile, RenderParams values) for `scene`. `features` overrides the
         detected flags (e.g. 'all'); the EQUIANGULAR flag then still follows this choice when it is
-        on, and code that exists but is not chosen is switched off by the parameter."""
-        detected = detect(scene)
+        on, and code that exists but is not chosen is switched off by the parameter. `detected`:
+        features.detect(scene), when the caller has it already."""
+        detected = detected if detected is not None else detect(scene)
         eq = self.uses_equiangular(scene, detected)
         feats = dict(detected if features is None else features)
         if features is None:

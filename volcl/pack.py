@@ -2,10 +2,23 @@
 
 Meshes become one triangle array, spheres their own array, and one BVH covers both. Objects that
 the scene shares (a bsdf or medium referenced twice) are stored once.
+
+A `Packer` holds what depends on the scene's structure only (which objects exist and which shape
+uses which bsdf, light and media: the indices the arrays refer to each other by) and packs the
+arrays in parts, so that an edited value (volcl.params) repacks only the part it lives in:
+
+    geometry   triangles, normals, spheres, BVH (nodes, leaves)     vertex positions, transforms
+    lights     light records, area-light triangle CDFs              emitter values, geometry
+    shapes     per-shape bsdf, light and media indices              structure only
+    bsdfs      bsdf records                                         bsdf colours and IORs
+    media      media records, grid descriptors and values           media coefficients, phase
+    camera     the reconstruction filter's table                    the film's filter
+and the RenderParams record, which is small and repacked with every part.
 """
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -18,6 +31,19 @@ from .mesh import triangle_areas32
 from .scene.model import Camera, Filter, Scene
 
 FILTER_TABLE_SIZE = 4097
+
+# part -> the arrays it packs, in the order parts are packed (shapes name the lights)
+PARTS = {
+    "geometry": ("nodes", "leaves", "triangles", "normals", "spheres"),
+    "lights": ("lights", "light_tri_cdf", "light_tris"),
+    "shapes": ("shapes",),
+    "bsdfs": ("bsdfs",),
+    "media": ("media", "grids", "grid_data"),
+    "camera": ("filter_table",),
+}
+# the kernel's buffer arguments, in order (kernels/render.cl)
+ARG_ORDER = ("nodes", "leaves", "triangles", "normals", "spheres", "shapes", "bsdfs", "lights",
+             "light_tri_cdf", "light_tris", "media", "grids", "grid_data", "params", "filter_table")
 
 
 @dataclass
@@ -80,24 +106,6 @@ def _pack_media(media, grids: GridPacker):
     return arr
 
 
-def _triangles(scene, shape_index):
-    """Every mesh's triangles, the per-triangle shape index, and packed shading normals."""
-    verts, shapes, normals, normal_owner = [], [], [], []
-    for s in scene.shapes:
-        if s.kind != "mesh":
-            continue
-        tri = s.vertices[s.faces]                       # (m, 3, 3)
-        verts.append(tri)
-        shapes.append(np.full(len(tri), shape_index[id(s)], np.int32))
-        has = s.normals is not None
-        normals.append(s.normals[s.faces] if has else np.zeros((0, 3, 3)))
-        normal_owner.append(np.full(len(tri), has))
-    if not verts:
-        return np.zeros((0, 3, 3)), np.zeros(0, np.int32), np.zeros((0, 3, 3)), np.zeros(0, bool)
-    return (np.concatenate(verts), np.concatenate(shapes), np.concatenate(normals),
-            np.concatenate(normal_owner))
-
-
 def filter_profile(f: Filter, x: np.ndarray) -> np.ndarray:
     """The 1D reconstruction filter's (unnormalized) weight at offsets x, in pixels."""
     r = f.radius
@@ -150,163 +158,222 @@ def camera_tangents(cam: Camera) -> tuple[float, float]:
     return tx, tx * h / w
 
 
+class Packer:
+    """The kernel arrays of one scene, packed part by part (see the module docstring). The scene's
+    structure must not change after construction; its values may, followed by pack(parts)."""
+
+    def __init__(self, scene: Scene, max_leaf: int = 4, majorant_cells: int | None = None):
+        self.scene = scene
+        self.max_leaf = max_leaf
+        self.majorant_cells = majorant_cells
+        self.shape_index = {id(s): i for i, s in enumerate(scene.shapes)}
+        self.bsdf_index, self.bsdfs = _index_by_identity(s.bsdf for s in scene.shapes)
+        self.medium_index, self.media = _index_by_identity(
+            [scene.camera.medium] + [m for s in scene.shapes for m in (s.interior, s.exterior)]
+            + list(scene.media))
+        self.sphere_shapes = [s for s in scene.shapes if s.kind == "sphere"]
+        self.sphere_of_shape = {id(s): i for i, s in enumerate(self.sphere_shapes)}
+        self.first_tri, offset = {}, 0
+        for s in scene.shapes:
+            if s.kind == "mesh":
+                self.first_tri[id(s)] = offset
+                offset += len(s.faces)
+        self.arrays: dict[str, np.ndarray] = {}
+        self.triangle_count = offset
+        self.bvh_seconds = 0.0
+        self.bounds = (np.zeros(3), np.zeros(3))
+        self.light_count, self.env_light, self.shape_light = 0, -1, {}
+        self.stats = {}
+
+    def medium_id(self, m) -> int:
+        return -1 if m is None else self.medium_index[id(m)]
+
+    def pack(self, parts=tuple(PARTS)) -> Packed:
+        """Pack `parts` (all by default) and the RenderParams record."""
+        for part in sorted(parts, key=list(PARTS).index):
+            getattr(self, "_pack_" + part)()
+        params = self._params()
+        self.arrays["params"] = params.reshape(1)      # a view: Packed.params edits it
+        ordered = {name: self.arrays[name] for name in ARG_ORDER}
+        return Packed(ordered, params, detect(self.scene), self.triangle_count,
+                      len(self.sphere_shapes), self.bvh_seconds, dict(self.stats))
+
+    # -- parts ----------------------------------------------------------------------------------
+
+    def _triangles(self):
+        """Every mesh's triangles, the per-triangle shape index, and packed shading normals."""
+        verts, shapes, normals, normal_owner = [], [], [], []
+        for s in self.scene.shapes:
+            if s.kind != "mesh":
+                continue
+            tri = s.vertices[s.faces]                       # (m, 3, 3)
+            verts.append(tri)
+            shapes.append(np.full(len(tri), self.shape_index[id(s)], np.int32))
+            has = s.normals is not None
+            normals.append(s.normals[s.faces] if has else np.zeros((0, 3, 3)))
+            normal_owner.append(np.full(len(tri), has))
+        if not verts:
+            return np.zeros((0, 3, 3)), np.zeros(0, np.int32), np.zeros((0, 3, 3)), np.zeros(0, bool)
+        return (np.concatenate(verts), np.concatenate(shapes), np.concatenate(normals),
+                np.concatenate(normal_owner))
+
+    def _pack_geometry(self):
+        tri_v, tri_shape, tri_n, tri_has_n = self._triangles()
+        ntri = len(tri_v)
+        tris = np.zeros(max(ntri, 1), layout.TRIANGLE)
+        if ntri:
+            tris["p0"][:ntri], tris["p1"][:ntri], tris["p2"][:ntri] = tri_v[:, 0], tri_v[:, 1], tri_v[:, 2]
+            tris["shape"][:ntri] = tri_shape
+            nidx = np.cumsum(tri_has_n) - 1
+            tris["normals"][:ntri] = np.where(tri_has_n, nidx, -1)
+        normals = np.zeros(max(int(tri_has_n.sum()), 1), layout.TRIANGLE_NORMALS)
+        if tri_has_n.any():
+            sel = tri_n
+            normals["n0"][:len(sel)], normals["n1"][:len(sel)], normals["n2"][:len(sel)] = \
+                sel[:, 0], sel[:, 1], sel[:, 2]
+
+        spheres = np.zeros(max(len(self.sphere_shapes), 1), layout.SPHERE)
+        for i, s in enumerate(self.sphere_shapes):
+            spheres[i]["center"], spheres[i]["radius"] = s.center, s.radius
+            spheres[i]["shape"], spheres[i]["flip"] = self.shape_index[id(s)], int(s.flip_normals)
+
+        # one BVH over triangles (codes >= 0) and spheres (codes < 0)
+        lo = [tri_v.min(axis=1)] if ntri else []
+        hi = [tri_v.max(axis=1)] if ntri else []
+        codes = [np.arange(ntri, dtype=np.int32)]
+        if self.sphere_shapes:
+            c = np.array([s.center for s in self.sphere_shapes], np.float64)
+            r = np.array([s.radius for s in self.sphere_shapes], np.float64)[:, None]
+            lo.append(c - r)
+            hi.append(c + r)
+            codes.append(-1 - np.arange(len(self.sphere_shapes), dtype=np.int32))
+        codes = np.concatenate(codes)
+        t0 = time.perf_counter()
+        if len(codes):
+            # shadow rays stop at the first opaque surface (kernels/bvh.h TRACE_SHADOW); a shape's
+            # bsdf kind is structure, so the mask never needs repacking after an edit
+            shape_opaque = np.array([s.bsdf.kind != "null" for s in self.scene.shapes], bool)
+            sphere_shape = np.array([self.shape_index[id(s)] for s in self.sphere_shapes], np.int64)
+            opaque = np.concatenate([shape_opaque[tri_shape], shape_opaque[sphere_shape]])
+            nodes, leaves = device_bvh(codes, np.concatenate(lo), np.concatenate(hi), tri_v, opaque,
+                                       max_leaf=self.max_leaf)
+            self.bounds = (np.concatenate(lo).min(0), np.concatenate(hi).max(0))
+        else:
+            nodes, leaves = empty_wide(), np.zeros(1, layout.LEAF_PACKET)
+            self.bounds = (np.zeros(3), np.zeros(3))
+        self.bvh_seconds = time.perf_counter() - t0
+        self.triangle_count = ntri
+        self.arrays.update(nodes=nodes, leaves=leaves, triangles=tris, normals=normals, spheres=spheres)
+
+    def _pack_lights(self):
+        """Area lights first (one per emitting shape), then the scene's other emitters."""
+        lights, light_cdf, light_tris = [], [], []
+        self.shape_light = {}
+        for s in self.scene.shapes:
+            if s.emitter_radiance is None:
+                continue
+            rec = np.zeros((), layout.LIGHT)
+            rec["type"] = layout.LIGHT_TYPES["area"]
+            rec["value"] = s.emitter_radiance
+            rec["sphere"] = -1
+            if s.kind == "sphere":
+                rec["sphere"] = self.sphere_of_shape[id(s)]
+                rec["area"] = 4 * math.pi * s.radius ** 2
+            else:
+                # areas of the float32 triangles the kernel samples: a sliver that collapses in
+                # float32 must not be picked (kernels/lights.h)
+                areas = triangle_areas32(s.vertices, s.faces)
+                keep = np.nonzero(areas > 0)[0]
+                total = areas[keep].sum()
+                rec["area"] = total
+                rec["tri_start"], rec["tri_count"] = len(light_cdf), len(keep)
+                cdf = np.cumsum(areas[keep]) / total
+                cdf[-1] = 1.0
+                light_cdf.extend(cdf.tolist())
+                light_tris.extend((self.first_tri[id(s)] + keep).tolist())
+            self.shape_light[id(s)] = len(lights)
+            lights.append(rec)
+        env_light = -1
+        for e in self.scene.emitters:
+            rec = np.zeros((), layout.LIGHT)
+            rec["type"] = layout.LIGHT_TYPES[e.kind]
+            rec["value"] = e.value
+            rec["sphere"] = -1
+            if e.kind == "point":
+                rec["position"] = e.position
+            elif e.kind == "directional":
+                rec["direction"] = np.asarray(e.direction) / np.linalg.norm(e.direction)
+            elif e.kind == "constant":
+                if env_light >= 0:      # two constant environments add up to one
+                    lights[env_light]["value"] = lights[env_light]["value"] + np.asarray(e.value, np.float32)
+                    continue
+                env_light = len(lights)
+            lights.append(rec)
+        light_arr = np.zeros(max(len(lights), 1), layout.LIGHT)
+        for i, rec in enumerate(lights):
+            light_arr[i] = rec
+        self.light_count, self.env_light = len(lights), env_light
+        self.arrays.update(lights=light_arr, light_tri_cdf=np.asarray(light_cdf or [1.0], np.float32),
+                           light_tris=np.asarray(light_tris or [0], np.int32))
+
+    def _pack_shapes(self):
+        shape_arr = np.zeros(max(len(self.scene.shapes), 1), layout.SHAPE_INFO)
+        for i, s in enumerate(self.scene.shapes):
+            r = shape_arr[i]
+            r["bsdf"] = self.bsdf_index[id(s.bsdf)]
+            r["light"] = self.shape_light.get(id(s), -1)
+            r["interior"], r["exterior"] = self.medium_id(s.interior), self.medium_id(s.exterior)
+            r["is_transition"] = int(s.interior is not None or s.exterior is not None)
+        self.arrays["shapes"] = shape_arr
+
+    def _pack_bsdfs(self):
+        self.arrays["bsdfs"] = _pack_bsdfs(self.bsdfs)
+
+    def _pack_media(self):
+        grids = GridPacker(self.majorant_cells)
+        media = _pack_media(self.media, grids)
+        grid_desc, grid_data = grids.arrays()
+        self.stats.update(grid_voxels=grids.voxels, majorant_cells=grids.majorant_count)
+        self.arrays.update(media=media, grids=grid_desc, grid_data=grid_data)
+
+    def _pack_camera(self):
+        self.arrays["filter_table"] = filter_table(self.scene.camera.rfilter)
+
+    def _params(self) -> np.ndarray:
+        cam = self.scene.camera
+        params = np.zeros((), layout.RENDER_PARAMS)
+        m = np.asarray(cam.to_world, np.float64)
+        params["cam_to_world"] = m[:3, :4].reshape(12)
+        params["tan_half"] = camera_tangents(cam)
+        params["near_clip"], params["far_clip"] = cam.near_clip, cam.far_clip
+        params["width"], params["height"] = cam.width, cam.height
+        integ = self.scene.integrator
+        params["max_depth"] = integ.max_depth
+        params["rr_depth"] = integ.rr_depth
+        params["hide_emitters"] = int(integ.hide_emitters)
+        params["specular_chains_only"] = int(integ.specular_chains_only)
+        params["camera_medium"] = self.medium_id(cam.medium)
+        params["light_count"] = self.light_count
+        params["env_light"] = self.env_light
+        params["filter_size"] = FILTER_TABLE_SIZE
+        params["filter_radius"] = cam.rfilter.radius
+        params["seed"] = self.scene.seed & 0xFFFFFFFF
+        params["nee"], params["mis"] = 1, 1
+        params["majorant_scale"] = 1.0
+        lo, hi = self.bounds
+        params["scene_center"] = 0.5 * (lo + hi)
+        params["scene_radius"] = 0.5 * float(np.linalg.norm(hi - lo))
+        return params
+
+
 def pack(scene: Scene, features: dict | None = None, max_leaf: int = 4, majorant_cells: int | None = None,
          majorant_scale: float = 1.0) -> Packed:
     """The scene as kernel arrays. majorant_cells: majorant cells per axis of every extinction grid
     (default: about one per MAJORANT_CELL_VOXELS voxels; 1 = a single global majorant);
     majorant_scale (>= 1) multiplies every majorant on the device, a test knob that must not change
     the expected image."""
-    import time
-    shape_index = {id(s): i for i, s in enumerate(scene.shapes)}
-    bsdf_index, bsdfs = _index_by_identity(s.bsdf for s in scene.shapes)
-    medium_index, media = _index_by_identity(
-        [scene.camera.medium] + [m for s in scene.shapes for m in (s.interior, s.exterior)] + list(scene.media))
-    mi = lambda m: -1 if m is None else medium_index[id(m)]     # noqa: E731
-
-    tri_v, tri_shape, tri_n, tri_has_n = _triangles(scene, shape_index)
-    ntri = len(tri_v)
-    tris = np.zeros(max(ntri, 1), layout.TRIANGLE)
-    if ntri:
-        tris["p0"][:ntri], tris["p1"][:ntri], tris["p2"][:ntri] = tri_v[:, 0], tri_v[:, 1], tri_v[:, 2]
-        tris["shape"][:ntri] = tri_shape
-        nidx = np.cumsum(tri_has_n) - 1
-        tris["normals"][:ntri] = np.where(tri_has_n, nidx, -1)
-    normals = np.zeros(max(int(tri_has_n.sum()), 1), layout.TRIANGLE_NORMALS)
-    if tri_has_n.any():
-        sel = tri_n
-        normals["n0"][:len(sel)], normals["n1"][:len(sel)], normals["n2"][:len(sel)] = sel[:, 0], sel[:, 1], sel[:, 2]
-
-    sphere_shapes = [s for s in scene.shapes if s.kind == "sphere"]
-    spheres = np.zeros(max(len(sphere_shapes), 1), layout.SPHERE)
-    for i, s in enumerate(sphere_shapes):
-        spheres[i]["center"], spheres[i]["radius"] = s.center, s.radius
-        spheres[i]["shape"], spheres[i]["flip"] = shape_index[id(s)], int(s.flip_normals)
-    sphere_of_shape = {id(s): i for i, s in enumerate(sphere_shapes)}
-
-    # lights: area lights first (one per emitting shape), then the scene's other emitters
-    lights, light_cdf, light_tris = [], [], []
-    shape_light = {}
-    first_tri = {}
-    offset = 0
-    for s in scene.shapes:
-        if s.kind == "mesh":
-            first_tri[id(s)] = offset
-            offset += len(s.faces)
-    for s in scene.shapes:
-        if s.emitter_radiance is None:
-            continue
-        rec = np.zeros((), layout.LIGHT)
-        rec["type"] = layout.LIGHT_TYPES["area"]
-        rec["value"] = s.emitter_radiance
-        rec["sphere"] = -1
-        if s.kind == "sphere":
-            rec["sphere"] = sphere_of_shape[id(s)]
-            rec["area"] = 4 * math.pi * s.radius ** 2
-        else:
-            # areas of the float32 triangles the kernel samples: a sliver that collapses in float32
-            # must not be picked (kernels/lights.h)
-            areas = triangle_areas32(s.vertices, s.faces)
-            keep = np.nonzero(areas > 0)[0]
-            total = areas[keep].sum()
-            rec["area"] = total
-            rec["tri_start"], rec["tri_count"] = len(light_cdf), len(keep)
-            cdf = np.cumsum(areas[keep]) / total
-            cdf[-1] = 1.0
-            light_cdf.extend(cdf.tolist())
-            light_tris.extend((first_tri[id(s)] + keep).tolist())
-        shape_light[id(s)] = len(lights)
-        lights.append(rec)
-    env_light = -1
-    for e in scene.emitters:
-        rec = np.zeros((), layout.LIGHT)
-        rec["type"] = layout.LIGHT_TYPES[e.kind]
-        rec["value"] = e.value
-        rec["sphere"] = -1
-        if e.kind == "point":
-            rec["position"] = e.position
-        elif e.kind == "directional":
-            rec["direction"] = np.asarray(e.direction) / np.linalg.norm(e.direction)
-        elif e.kind == "constant":
-            if env_light >= 0:      # two constant environments add up to one
-                lights[env_light]["value"] = lights[env_light]["value"] + np.asarray(e.value, np.float32)
-                continue
-            env_light = len(lights)
-        lights.append(rec)
-    light_arr = np.zeros(max(len(lights), 1), layout.LIGHT)
-    for i, rec in enumerate(lights):
-        light_arr[i] = rec
-
-    bsdf_arr = _pack_bsdfs(bsdfs)
-    shape_arr = np.zeros(max(len(scene.shapes), 1), layout.SHAPE_INFO)
-    for i, s in enumerate(scene.shapes):
-        r = shape_arr[i]
-        r["bsdf"] = bsdf_index[id(s.bsdf)]
-        r["light"] = shape_light.get(id(s), -1)
-        r["interior"], r["exterior"] = mi(s.interior), mi(s.exterior)
-        r["is_transition"] = int(s.interior is not None or s.exterior is not None)
-
-    # one BVH over triangles (codes >= 0) and spheres (codes < 0)
-    lo = [tri_v.min(axis=1)] if ntri else []
-    hi = [tri_v.max(axis=1)] if ntri else []
-    codes = [np.arange(ntri, dtype=np.int32)]
-    if sphere_shapes:
-        c = np.array([s.center for s in sphere_shapes], np.float64)
-        r = np.array([s.radius for s in sphere_shapes], np.float64)[:, None]
-        lo.append(c - r)
-        hi.append(c + r)
-        codes.append(-1 - np.arange(len(sphere_shapes), dtype=np.int32))
-    codes = np.concatenate(codes)
-    t0 = time.perf_counter()
-    if len(codes):
-        # shadow rays stop at the first opaque surface (kernels/bvh.h TRACE_SHADOW)
-        shape_opaque = bsdf_arr["type"][shape_arr["bsdf"]] != layout.BSDF_TYPES["null"]
-        sphere_shape = np.array([shape_index[id(s)] for s in sphere_shapes], np.int64)
-        opaque = np.concatenate([shape_opaque[tri_shape], shape_opaque[sphere_shape]])
-        nodes, leaves = device_bvh(codes, np.concatenate(lo), np.concatenate(hi), tri_v, opaque,
-                                   max_leaf=max_leaf)
-        bounds_lo, bounds_hi = np.concatenate(lo).min(0), np.concatenate(hi).max(0)
-    else:
-        nodes, leaves = empty_wide(), np.zeros(1, layout.LEAF_PACKET)
-        bounds_lo = bounds_hi = np.zeros(3)
-    bvh_seconds = time.perf_counter() - t0
-
-    grids = GridPacker(majorant_cells)
-    media_arr = _pack_media(media, grids)
-    grid_desc, grid_data = grids.arrays()
-
-    cam = scene.camera
-    params = np.zeros((), layout.RENDER_PARAMS)
-    m = np.asarray(cam.to_world, np.float64)
-    params["cam_to_world"] = m[:3, :4].reshape(12)
-    params["tan_half"] = camera_tangents(cam)
-    params["near_clip"], params["far_clip"] = cam.near_clip, cam.far_clip
-    params["width"], params["height"] = cam.width, cam.height
-    integ = scene.integrator
-    params["max_depth"] = integ.max_depth
-    params["rr_depth"] = integ.rr_depth
-    params["hide_emitters"] = int(integ.hide_emitters)
-    params["specular_chains_only"] = int(integ.specular_chains_only)
-    params["camera_medium"] = mi(cam.medium)
-    params["light_count"] = len(lights)
-    params["env_light"] = env_light
-    params["filter_size"] = FILTER_TABLE_SIZE
-    params["filter_radius"] = cam.rfilter.radius
-    params["seed"] = scene.seed & 0xFFFFFFFF
-    params["nee"], params["mis"] = 1, 1
-    params["majorant_scale"] = majorant_scale
-    center = 0.5 * (bounds_lo + bounds_hi)
-    params["scene_center"] = center
-    params["scene_radius"] = 0.5 * float(np.linalg.norm(bounds_hi - bounds_lo))
-
-    arrays = {
-        "nodes": nodes, "leaves": leaves, "triangles": tris, "normals": normals, "spheres": spheres,
-        "shapes": shape_arr, "bsdfs": bsdf_arr, "lights": light_arr,
-        "light_tri_cdf": np.asarray(light_cdf or [1.0], np.float32),
-        "light_tris": np.asarray(light_tris or [0], np.int32),
-        "media": media_arr, "grids": grid_desc, "grid_data": grid_data,
-        "params": params.reshape(1),
-        "filter_table": filter_table(cam.rfilter),
-    }
-    feats = features if features is not None else detect(scene)
-    stats = {"grid_voxels": grids.voxels, "majorant_cells": grids.majorant_count}
-    return Packed(arrays, params, feats, ntri, len(sphere_shapes), bvh_seconds, stats)
+    packed = Packer(scene, max_leaf=max_leaf, majorant_cells=majorant_cells).pack()
+    packed.params["majorant_scale"] = majorant_scale
+    if features is not None:
+        packed.features = features
+    return packed

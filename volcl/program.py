@@ -1,21 +1,23 @@
-"""Finding the OpenCL sources and building the render program once per feature set.
+"""Finding the OpenCL sources and building the render program once per feature set and device.
 
 Sources live in the top-level kernels/ folder of a checkout and ship inside the installed package
 as volcl/kernels; they are compiled with -I so compiler messages name the real file and line.
-Builds are cached in memory per (context, feature set) and on disk by pyopencl and the driver; the
-options carry a hash of every kernel file, so an edited header can never reuse a stale binary.
+Built programs are kept in memory by a ProgramCache, one per OpenCL context (volcl.device.Device
+owns both), and on disk by pyopencl and the driver; the options carry a hash of every kernel file,
+so an edited header can never reuse a stale binary.
 """
 from __future__ import annotations
 
 import hashlib
 import json
 import os
+import threading
 import time
 from functools import lru_cache
 from pathlib import Path
 
 from . import features as feat
-from .device import cl
+from .opencl import cl
 
 ENTRY_FILE = "render.cl"
 
@@ -45,29 +47,58 @@ def build_options(features: dict[str, bool], extra: tuple[str, ...] = ()) -> lis
             + feat.defines(features) + list(extra))
 
 
-_cache: dict = {}
-last_build_seconds: dict = {}
+def _source_path(source_file) -> Path:
+    # test kernels pass a path of their own; they include volcl's headers through -I
+    return Path(source_file) if Path(source_file).is_absolute() else kernels_dir() / source_file
 
 
-def build_program(ctx, features: dict[str, bool], source_file=ENTRY_FILE,
-                  extra: tuple[str, ...] = ()):
-    """The built program for this context and feature set; built at most once per process."""
-    key = (id(ctx), str(source_file), tuple(sorted(features.items())), extra)
-    prog = _cache.get(key)
-    if prog is None:
-        # test kernels pass a path of their own; they include volcl's headers through -I
-        path = Path(source_file) if Path(source_file).is_absolute() else kernels_dir() / source_file
-        src = path.read_text()
-        t0 = time.perf_counter()
-        prog = cl.Program(ctx, src).build(options=build_options(features, extra))
-        last_build_seconds[key] = time.perf_counter() - t0
-        _cache[key] = (prog, ctx)   # keep ctx alive so id(ctx) is never reused by another context
+def build_program(ctx, features: dict[str, bool], source_file=ENTRY_FILE, extra: tuple[str, ...] = ()):
+    """Build the program for `ctx` now (pyopencl's and the driver's disk caches may make it quick);
+    nothing is kept in memory. Renders get their programs from a ProgramCache instead."""
+    src = _source_path(source_file).read_text()
+    return cl.Program(ctx, src).build(options=build_options(features, extra))
+
+
+def program_key(features: dict[str, bool], source_file=ENTRY_FILE, extra: tuple[str, ...] = ()) -> tuple:
+    return str(source_file), tuple(sorted((k, bool(v)) for k, v in features.items())), tuple(extra)
+
+
+class ProgramCache:
+    """The programs built for one OpenCL context, each built once: keyed by source file, feature set
+    and extra options. Safe to use from several threads (a program asked for by two threads at
+    once is built once)."""
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self._programs: dict[tuple, object] = {}
+        self._seconds: dict[tuple, float] = {}
+        self._lock = threading.Lock()
+        self.builds = 0             # programs built (not found in memory) so far
+
+    def __contains__(self, key) -> bool:
+        return key in self._programs
+
+    def __len__(self) -> int:
+        return len(self._programs)
+
+    def get(self, features: dict[str, bool], source_file=ENTRY_FILE, extra: tuple[str, ...] = ()):
+        key = program_key(features, source_file, extra)
+        prog = self._programs.get(key)
+        if prog is not None:
+            return prog
+        with self._lock:
+            prog = self._programs.get(key)
+            if prog is None:
+                t0 = time.perf_counter()
+                prog = build_program(self.ctx, features, source_file, extra)
+                self._seconds[key] = time.perf_counter() - t0
+                self._programs[key] = prog
+                self.builds += 1
         return prog
-    return prog[0]
 
-
-def build_seconds(ctx, features, source_file: str = ENTRY_FILE, extra: tuple[str, ...] = ()) -> float:
-    return last_build_seconds.get((id(ctx), str(source_file), tuple(sorted(features.items())), extra), 0.0)
+    def seconds(self, features: dict[str, bool], source_file=ENTRY_FILE, extra: tuple[str, ...] = ()) -> float:
+        """How long building this program took (0 if it was never built here)."""
+        return self._seconds.get(program_key(features, source_file, extra), 0.0)
 
 
 def _build_log_path() -> Path:

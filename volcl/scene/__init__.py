@@ -12,9 +12,9 @@ from typing import Mapping, Optional, Union
 from . import parse_mitsuba, parse_nori
 from .model import Scene, TTest
 from .parse_common import Context, Dialect, read_object, substitute_parameters
-from .xml import Element, parse_file
+from .xml import Element, parse_bytes, parse_file
 
-__all__ = ["load"]
+__all__ = ["load", "load_string"]
 
 _DEFAULT_PARENTS = {"scene", "test"}
 
@@ -27,6 +27,20 @@ def load(path: Union[str, os.PathLike], defines: Optional[Mapping[str, str]] = N
     substitute_parameters(root, {str(k): str(v) for k, v in (defines or {}).items()},
                           _DEFAULT_PARENTS)
     ctx = Context(path, _dialect(root))
+    return read_object(ctx, root).obj
+
+
+def load_string(text: Union[str, bytes], base_dir: Union[str, os.PathLike, None] = None,
+                defines: Optional[Mapping[str, str]] = None, name: str = "<string>") -> Union[Scene, TTest]:
+    """Load a scene from XML text. Messages name the text `name`; files it refers to (meshes,
+    volumes) are found relative to `base_dir` (default: the working folder)."""
+    data = text.encode("utf-8") if isinstance(text, str) else bytes(text)
+    root = parse_bytes(data, name)
+    substitute_parameters(root, {str(k): str(v) for k, v in (defines or {}).items()},
+                          _DEFAULT_PARENTS)
+    # relative file names resolve against the folder of the context's path (objects.resolve_path)
+    folder = os.path.abspath(os.fspath(base_dir) if base_dir is not None else os.getcwd())
+    ctx = Context(os.path.join(folder, name), _dialect(root))
     return read_object(ctx, root).obj
 
 

@@ -68,6 +68,8 @@ class Bsdf:
     twosided: bool = False
     id: str = ""
     source: Optional[Source] = None
+    # a two-sided bsdf is a copy of the one it wraps; edits of that one's values reach it too
+    twosided_of: Optional["Bsdf"] = None
 
 
 @dataclass
@@ -85,6 +87,13 @@ class Shape:
     exterior: Optional[Medium] = None
     id: str = ""
     source: Optional[Source] = None
+    # What the world-space fields were made from (volcl.scene.shapes places it again when the
+    # transform is edited): the object-space mesh (a volcl.mesh.TriangleMesh) or sphere
+    # (center, radius), the to_world matrix, and whether the file asked for face normals.
+    local: object = None
+    to_world: np.ndarray = field(default_factory=lambda: np.eye(4))
+    face_normals: bool = False
+    emitter_id: str = ""             # the area emitter's own id, if it has one
 
 
 @dataclass
@@ -94,6 +103,7 @@ class Emitter:
     position: Optional[np.ndarray] = None
     direction: Optional[np.ndarray] = None    # directional: direction the light travels
     source: Optional[Source] = None
+    id: str = ""
 
 
 @dataclass
@@ -114,6 +124,7 @@ class Camera:
     far_clip: float = 1e4
     rfilter: Filter = field(default_factory=Filter)
     medium: Optional[Medium] = None
+    id: str = ""
 
 
 @dataclass

@@ -12,11 +12,10 @@ from typing import Optional
 import numpy as np
 
 from .. import mesh as meshes
-from . import transform as tf
 from ..errors import VolclError
+from . import checks
 from .model import Bsdf, Camera, Filter, Phase, Volume
 from .parse_common import Node
-from .properties import FLOAT32_MAX
 from .volfile import read_vol
 from .xml import Element
 
@@ -81,27 +80,19 @@ def ior(node: Node, name: str, default: str | float) -> float:
             raise node.fail(name, f"unknown IOR name {value!r} for '{name}'; supported: "
                             + ", ".join(IOR_NAMES) + ", or a number")
         return IOR_NAMES[key]
-    if not value > 0:
-        raise node.fail(name, f"'{name}' must be > 0, got {value}")
-    return float(value)
+    return float(node.checked(name, checks.positive, name, value))
 
 
 def phase_hg(node: Node, name: str, default: float) -> Phase:
-    g = node.float(name, default)
-    if not -1 < g < 1:
-        raise node.fail(name, f"'{name}' = {g} is outside the allowed range -1 < g < 1")
-    return Phase("hg", g)
+    return Phase("hg", node.checked(name, checks.hg_g, name, node.float(name, default)))
 
 
 def check_volume_range(where: Element, name: str, volume: Volume, upper: Optional[float]) -> None:
     """sigma_t values must be >= 0; albedo values must also be <= 1."""
-    values = volume.data if volume.kind == "grid" else volume.value
-    low, high = float(np.min(values)), float(np.max(values))
-    if low < 0 or (upper is not None and high > upper):
-        allowed = ">= 0" if upper is None else f"in [0, {upper:g}]"
-        found = f" in {volume.filename}" if volume.kind == "grid" else ""
-        raise where.error(f"'{name}' values must be {allowed}; found values from {low:g} to "
-                          f"{high:g}{found}")
+    try:
+        checks.volume_range(name, volume, upper)
+    except checks.CheckError as exc:
+        raise where.error(str(exc)) from None
 
 
 def _shape_name(node: Node) -> str:
@@ -113,40 +104,13 @@ def _shape_name(node: Node) -> str:
 
 
 def check_shape(node: Node, shape) -> None:
-    """Rules for a finished shape that no single parameter decides: an area emitter needs a mesh
-    with some area (in the float32 the kernels compute in; its triangles are sampled by area), and
-    an interior medium needs a closed, consistently wound mesh around it (the kernels tell inside
-    from outside by the side each triangle is crossed from)."""
-    if shape.kind != "mesh":
-        return
-    if shape.emitter_radiance is not None:
-        areas = meshes.triangle_areas32(shape.vertices, shape.faces)
-        if not areas.sum() > 0:
-            raise node.fail(None, f"{_shape_name(node)} carries an area emitter but its mesh has zero "
-                                  f"total area (all {len(areas)} triangles are degenerate in single "
-                                  f"precision): an emitter needs triangles of positive area")
-    if shape.interior is not None:
-        problem = meshes.closure_problem(shape.vertices, shape.faces)
-        if problem is not None:
-            raise node.fail(None, f"{_shape_name(node)} has an interior medium, but {problem}; a "
-                                  f"medium must be enclosed by a closed, consistently wound mesh "
-                                  f"(close the mesh, or give an open surface only an exterior medium)")
+    """Rules for a finished shape that no single parameter decides (volcl.scene.checks.shape_rules)."""
+    node.checked(None, checks.shape_rules, shape, _shape_name(node))
 
 
 def check_medium(node: Node, medium) -> None:
-    """Coefficients valid one by one can still overflow float32 once combined: sigma_t times
-    scale, and the emission sigma_a * radiance the kernels are given."""
-    def biggest(value):
-        return float(np.max(value.data if value.kind == "grid" else value.value)) \
-            if isinstance(value, Volume) else float(np.max(value))
-    sigma_t = biggest(medium.sigma_t) * medium.scale
-    limits = [("sigma_t (times scale)", sigma_t)]
-    if medium.radiance is not None:
-        limits.append(("the emission sigma_t * radiance", sigma_t * float(np.max(medium.radiance))))
-    for what, value in limits:
-        if not value <= FLOAT32_MAX:
-            raise node.fail(None, f"{what} reaches {value:.4g}, beyond the single-precision range "
-                                  f"volcl renders in (<= {FLOAT32_MAX:.7g})")
+    """Coefficients valid one by one can still overflow float32 once combined (volcl.scene.checks)."""
+    node.checked(None, checks.medium_limits, medium)
 
 
 def camera(node: Node, *, fov: float, fov_axis: str, width: int, height: int, near: float,
@@ -162,14 +126,7 @@ def camera(node: Node, *, fov: float, fov_axis: str, width: int, height: int, ne
         raise node.fail(names["near"], f"near clip must be > 0, got {near}")
     if not far > near:
         raise node.fail(names["far"], f"far clip ({far}) must exceed near clip ({near})")
-    if not (np.abs(to_world) <= FLOAT32_MAX).all():
-        raise node.fail(names["to_world"], "the camera's transform places it beyond the "
-                                           "single-precision floating-point range volcl renders in")
-    scale = tf.similarity_scale(to_world)
-    if scale is None or abs(scale - 1) > 1e-3:
-        # As in Mitsuba 3: ray directions and the field of view assume an unscaled frame.
-        raise node.fail(names["to_world"], "the camera's transform may rotate, translate and "
-                                           "mirror, but not scale or shear")
+    node.checked(names["to_world"], checks.camera_transform, to_world)
     return Camera(to_world=to_world, fov=fov, fov_axis=fov_axis, width=width, height=height,
                   near_clip=near, far_clip=far, rfilter=rfilter)
 

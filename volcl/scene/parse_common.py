@@ -14,6 +14,7 @@ from typing import Callable, Mapping, Optional
 import numpy as np
 
 from ..errors import VolclError
+from . import checks
 from .model import Source, rgb
 from .properties import Prop, check_attrs, check_leaf, parse_property
 from .xml import Element
@@ -280,6 +281,13 @@ class Node:
     def fail(self, name: Optional[str], message: str) -> VolclError:
         return self.at(name).error(message)
 
+    def checked(self, name: Optional[str], rule, *args):
+        """rule(*args) from volcl.scene.checks, its CheckError blamed on parameter `name`."""
+        try:
+            return rule(*args)
+        except checks.CheckError as exc:
+            raise self.fail(name, str(exc)) from None
+
     def value(self, name: str, default=None):
         prop = self.props.get(name)
         if prop is None:
@@ -312,10 +320,7 @@ class Node:
     # -- validated reading --------------------------------------------------------------------
 
     def positive(self, name: str, default: Optional[float] = None) -> float:
-        value = self.float(name, default)
-        if not value > 0:
-            raise self.fail(name, f"'{name}' must be > 0, got {value}")
-        return value
+        return self.checked(name, checks.positive, name, self.float(name, default))
 
     def choice(self, name: str, options, default: Optional[str] = None) -> str:
         value = self.string(name, default)
@@ -324,16 +329,10 @@ class Node:
         return value
 
     def nonneg_color(self, name: str, default=None) -> np.ndarray:
-        value = self.color(name, default)
-        if (value < 0).any():
-            raise self.fail(name, f"'{name}' must be >= 0, got {value.tolist()}")
-        return value
+        return self.checked(name, checks.nonneg_color, name, self.color(name, default))
 
     def unit_color(self, name: str, default=None) -> np.ndarray:
-        value = self.color(name, default)
-        if (value < 0).any() or (value > 1).any():
-            raise self.fail(name, f"'{name}' must lie in [0, 1], got {value.tolist()}")
-        return value
+        return self.checked(name, checks.unit_color, name, self.color(name, default))
 
     # -- children -----------------------------------------------------------------------------
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from . import objects, transform as tf
+from . import checks, objects, transform as tf
 from .model import (Bsdf, Camera, Emitter, Filter, Integrator, Medium, Phase, Scene, Volume, rgb)
 from .objects import AreaLight, Sampler
 from .parse_common import Dialect, Node, Spec, medium_list
@@ -172,6 +172,7 @@ def build_sensor(node: Node) -> Sensor:
                                    "near": "near_clip", "far": "far_clip",
                                    "to_world": "to_world"})
     camera.medium = medium.obj if medium else None
+    camera.id = node.element.attrs.get("id", "")
     return Sensor(camera, sampler.obj if sampler else Sampler(4))
 
 
@@ -234,6 +235,7 @@ def _attach_emitter_and_media(node: Node, shape) -> None:
                                         "point, directional and constant emitters go directly "
                                         "inside <scene>")
         shape.emitter_radiance = emitter.obj.radiance
+        shape.emitter_id = emitter.element.attrs.get("id", "")
     for child in node.objects("medium"):
         if child.name not in ("interior", "exterior"):
             raise child.element.error(f"a medium inside a shape needs name=\"interior\" or "
@@ -259,7 +261,8 @@ def _twosided(node: Node) -> Bsdf:
         raise inner[0].element.error(f"twosided cannot wrap a {inner[0].obj.kind} bsdf: only "
                                      f"materials without transmission can be two-sided")
     # A copy, so that a shared bsdf referenced elsewhere stays one-sided there.
-    return replace(inner[0].obj, twosided=True)
+    wrapped = inner[0].obj
+    return replace(wrapped, twosided=True, twosided_of=wrapped.twosided_of or wrapped)
 
 
 def _dielectric(node: Node) -> Bsdf:
@@ -314,9 +317,7 @@ def _directional(node: Node) -> Emitter:
         direction = node.point("direction")
     else:
         direction = tf.apply_vector(node.transform("to_world"), [0.0, 0.0, 1.0])
-    direction = tf.normalize(direction)
-    if not np.any(direction):
-        raise node.fail("direction", "the direction is the zero vector")
+    direction = node.checked("direction", checks.direction, direction)
     return Emitter("directional", node.nonneg_color("irradiance", 1.0), direction=direction,
                    source=node.source())
 
@@ -331,7 +332,10 @@ _EMITTERS = {
 
 
 def build_emitter(node: Node):
-    return _EMITTERS[node.type](node)
+    emitter = _EMITTERS[node.type](node)
+    if isinstance(emitter, Emitter):
+        emitter.id = node.element.attrs.get("id", "")
+    return emitter
 
 
 # ---------------------------------------------------------------------------------------------

@@ -110,13 +110,15 @@ def build_integrator(node: Node) -> Integrator:
 
 def build_camera(node: Node):
     rfilter = node.single("rfilter")
-    return objects.camera(
+    camera = objects.camera(
         node, fov=node.float("fov", 30.0), fov_axis="x", width=node.int("width", 1280),
         height=node.int("height", 720), near=node.float("nearClip", 1e-4),
         far=node.float("farClip", 1e4), to_world=node.transform("toWorld"),
         rfilter=rfilter.obj if rfilter else Filter("gaussian", radius=2.0, stddev=0.5),
         names={"fov": "fov", "width": "width", "height": "height", "near": "nearClip",
                "far": "farClip", "to_world": "toWorld"})
+    camera.id = node.element.attrs.get("id", "")
+    return camera
 
 
 def build_rfilter(node: Node) -> Filter:
@@ -166,7 +168,8 @@ def build_emitter(node: Node):
         return AreaLight(node.nonneg_color("radiance"))
     power = node.nonneg_color("power")
     return Emitter("point", power / (4.0 * math.pi),
-                   position=node.point("position", np.zeros(3)), source=node.source())
+                   position=node.point("position", np.zeros(3)), source=node.source(),
+                   id=node.element.attrs.get("id", ""))
 
 
 def build_medium(node: Node) -> Medium:

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .checks import FLOAT32_MAX, CheckError, finite, invertible
 from . import transform as tf
 from .xml import Element
 
@@ -30,19 +31,16 @@ class Prop:
     element: Element
 
 
-# The kernels compute in float32: a value beyond its range would reach them as infinity.
-FLOAT32_MAX = float(np.finfo(np.float32).max)
+__all__ = ["FLOAT32_MAX", "Prop", "parse_property"]
 
 
 def parse_float(text: str, el: Element, what: str) -> float:
     text = text.strip()
-    value = float(text) if _FLOAT.match(text) else None
-    if value is None or not math.isfinite(value):
-        raise el.error(f"{what}: {text!r} is not a finite number")
-    if abs(value) > FLOAT32_MAX:
-        raise el.error(f"{what}: {text!r} is beyond the single-precision floating-point range volcl "
-                       f"renders in (|x| <= {FLOAT32_MAX:.7g})")
-    return value
+    value = float(text) if _FLOAT.match(text) else math.nan
+    try:
+        return finite(what, value, text)
+    except CheckError as exc:
+        raise el.error(str(exc)) from None
 
 
 def parse_floats(text: str, el: Element, what: str, counts: tuple[int, ...]) -> list[float]:
@@ -152,10 +150,10 @@ def parse_transform(el: Element) -> np.ndarray:
                            + ", ".join(sorted(_TRANSFORM_OPS)))
         check_leaf(op)
         m = reader(op) @ m
-    if not tf.is_invertible(m):
-        raise el.error(f"transform '{el.attrs['name']}' is singular or not finite (a scale of "
-                       f"zero, or huge values?)")
-    return m
+    try:
+        return invertible(el.attrs["name"], m)
+    except CheckError as exc:
+        raise el.error(str(exc)) from None
 
 
 def _translate(op: Element) -> np.ndarray:

@@ -1,34 +1,41 @@
-"""Rendering on the device: upload the packed scene once, launch one sample pass at a time,
-accumulate on the device, and read back the mean image with its per-pixel variance.
+"""Rendering on one device: launch one sample pass at a time over a tile (by default the whole
+image), accumulate on the device, and read back the mean image with its per-pixel variance.
 
 Accumulation layout. The device keeps `slots` accumulators per pixel (several when the image is
 too small to fill the device with one sample per pixel). Sample index i of a pixel always lands in
 slot i % slots, and each slot adds its samples in increasing sample index, so the float32 sums,
 and with them the image, are bit-identical however the samples were grouped: one render() call or
-many, a checkpoint restored in another process, any launch size. `slots` depends on the image
-size only, never on the device or on timing. (A different `slots` partitions the samples
-differently and changes the last bits; the Renderer's `slots` argument exists for tests.)
+many, a checkpoint restored in another process, any launch size, any tile. `slots` depends on the
+size of the whole image only (volcl.tiles.accumulator_slots), never on the tile, the device or on
+timing. (A different `slots` partitions the samples differently and changes the last bits; the
+Renderer's `slots` argument exists for tests.)
+
+What a Renderer owns: its accumulators, its RenderParams buffer (seed and estimator switches) and
+its kernel object. What it shares: the scene's buffers on the device (volcl.prepared.Scene.upload)
+and the device's context, queue and built programs (volcl.device.Device).
 """
 from __future__ import annotations
 
 import hashlib
 import math
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import __version__
 from . import device as devmod
-from .accuracy import relative_standard_error
-from .device import cl
+from .errors import VolclError
 from .estimator import Estimator
 from .features import describe
-from .pack import pack
-from .program import build_program, build_seconds, note_build
-from .scene.model import Scene
+from .opencl import cl
+from .pack import ARG_ORDER
+from .prepared import Scene as PreparedScene
+from .program import note_build, sources_hash
+from .result import RenderResult
+from .scene.model import Scene as ModelScene
+from .tiles import MIN_ITEMS, Tile, accumulator_slots, slice_state
 
-# Work items per launch: enough to fill a device, small enough to keep a launch short.
-MIN_ITEMS = 1 << 14
+# Work items per launch: enough to fill a device (MIN_ITEMS), small enough to keep a launch short.
 MAX_ITEMS = 1 << 19
 # GPUs that drive a display reset kernels running longer than a watchdog limit (about 2 s on
 # Windows, 5 s on X11), and a desktop stutters long before that: on a GPU each launch is kept
@@ -38,96 +45,95 @@ _DEFAULT = object()
 # Samples per pixel before a target error is trusted: with fewer, a pixel whose rare bright paths
 # have not turned up yet reports a small variance along with its small mean (README, "Accuracy").
 MIN_SPP_FOR_ERROR = 16
-
-
-@dataclass
-class RenderResult:
-    image: np.ndarray           # (h, w, 3) float32 mean radiance
-    variance: np.ndarray        # (h, w, 3) variance of that mean, from the samples themselves
-    spp: int
-    invalid: int                # samples that came out NaN, infinite or negative and were left out
-    seconds: float
-    device: str
-    features: dict
-    build_seconds: float
-    stats: dict = field(default_factory=dict)
-    # medium segments whose delta / ratio tracking hit its step bound and was cut short (each a
-    # biased estimate; never happens in ordinary scenes, see kernels/media.h)
-    tracking_cutoffs: int = 0
-    stop_reason: str = "spp"    # the rule that ended the render: 'spp', 'time' or 'error'
-
-    @property
-    def rel_error(self) -> float:
-        """The image's estimated relative standard error (volcl.accuracy.relative_standard_error)."""
-        return relative_standard_error(self.image, self.variance)
-
-    @property
-    def samples_per_second(self) -> float:
-        h, w = self.image.shape[:2]
-        return h * w * self.spp / self.seconds if self.seconds > 0 else float("inf")
+# bytes of accumulators per pixel and slot: sums and sums of squares (float4 each), invalid and
+# cut-off counts (uint each)
+ACCUMULATOR_BYTES = 40
 
 
 class Renderer:
-    """A scene uploaded to one device with its program built, ready for sample passes.
+    """A render in progress on one device: a scene (a volcl.prepared.Scene, or a model Scene,
+    which is then packed and uploaded for this renderer alone), a seed, an estimator and a tile,
+    accumulating sample passes.
 
-    `slots` and `tile` (pixels per launch) override the defaults, for tests. `launch_seconds` is
-    the time budget of one launch: by default GPU_LAUNCH_SECONDS on GPUs and none elsewhere (a CPU
-    device runs fixed launches of up to MAX_ITEMS work items, with no timing in between).
+    `slots` and `launch_pixels` (pixels per launch) override the defaults, for tests.
+    `launch_seconds` is the time budget of one launch: by default GPU_LAUNCH_SECONDS on GPUs and
+    none elsewhere (a CPU device runs fixed launches of up to MAX_ITEMS work items, with no timing
+    in between). `majorant_cells` applies when a model Scene is packed here.
     """
 
-    ARG_ORDER = ("nodes", "leaves", "triangles", "normals", "spheres", "shapes", "bsdfs", "lights",
-                 "light_tri_cdf", "light_tris", "media", "grids", "grid_data", "params", "filter_table")
+    ARG_ORDER = ARG_ORDER
 
-    def __init__(self, scene: Scene, device: devmod.DeviceInfo | None = None, features: dict | None = None,
-                 seed: int | None = None, slots: int | None = None, tile: int | None = None,
-                 launch_seconds=_DEFAULT, majorant_cells: int | None = None, majorant_scale: float = 1.0,
-                 estimator: Estimator | None = None):
-        self.scene = scene
-        self.device = device or devmod.choose()
+    def __init__(self, scene, device=None, features: dict | None = None, seed: int | None = None,
+                 slots: int | None = None, launch_pixels: int | None = None, launch_seconds=_DEFAULT,
+                 majorant_cells: int | None = None, majorant_scale: float = 1.0,
+                 estimator: Estimator | None = None, tile=None):
+        if isinstance(scene, ModelScene):
+            scene = PreparedScene(scene, majorant_cells=majorant_cells)
+        elif majorant_cells is not None:
+            raise ValueError("majorant_cells is a packing choice: give it to volcl.prepared.Scene")
+        self.prepared = scene
+        self.scene = scene.model
+        self.version = scene.version
+        self.device = devmod.resolve(device)
         self.estimator = estimator or Estimator()
-        features, estimator_params = self.estimator.resolve(scene, features)
-        self.packed = pack(scene, features, majorant_cells=majorant_cells, majorant_scale=majorant_scale)
+        packed = scene.packed
+        self.features, estimator_params = self.estimator.resolve(self.scene, features, detected=packed.features)
+        self.params = packed.params.copy()
         for name, value in estimator_params.items():
-            self.packed.arrays["params"][name] = value
-        # a scene too large for the device is the user's to fix: say so before uploading anything
-        # (accumulators: sums, sums_sq, invalid, cutoffs for at least MIN_ITEMS slots, see below)
-        devmod.check_fits(self.device, {name: self.packed.arrays[name].nbytes for name in self.ARG_ORDER},
-                          accumulator_bytes=40 * max(scene.camera.width * scene.camera.height, MIN_ITEMS))
+            self.params[name] = value
+        self.params["majorant_scale"] = majorant_scale
         if seed is not None:
-            self.packed.arrays["params"]["seed"] = seed & 0xFFFFFFFF
-        self.seed = int(self.packed.arrays["params"]["seed"][0])
-        self.ctx = cl.Context([self.device.device])
-        self.queue = cl.CommandQueue(self.ctx)
-        t0 = time.perf_counter()
-        self.program = build_program(self.ctx, self.packed.features)
-        self.build_seconds = build_seconds(self.ctx, self.packed.features) or (time.perf_counter() - t0)
-        self.cold_build_seconds, self.build_was_cold = note_build(self.device.name, self.packed.features,
-                                                                  self.build_seconds)
+            self.params["seed"] = seed & 0xFFFFFFFF
+        self.seed = int(self.params["seed"])
+        self.width, self.height = self.scene.camera.width, self.scene.camera.height
+        self.tile = Tile.of(tile, self.width, self.height)
+        self.npix = self.tile.pixels
+        self.slots = int(slots) if slots else accumulator_slots(self.width, self.height)
+        # a scene too large for the device is the user's to fix: say so before uploading anything
+        devmod.check_fits(self.device, scene.buffer_sizes(),
+                          accumulator_bytes=ACCUMULATOR_BYTES * max(self.slots * self.npix, MIN_ITEMS))
+        self.uploaded = scene.upload(self.device)
+        self._get_program()
+        ctx = self.device.ctx
+        self.queue = self.device.queue
         self.kernel = cl.Kernel(self.program, "render_pass")
         mf = cl.mem_flags
-        self.buffers = [cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR,
-                                  hostbuf=np.ascontiguousarray(self.packed.arrays[name]))
-                        for name in self.ARG_ORDER]
-        self.width, self.height = scene.camera.width, scene.camera.height
-        self.npix = self.width * self.height
-        self.slots = int(slots) if slots else int(np.clip(MIN_ITEMS // self.npix, 1, 4096))
+        self.params_buffer = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=self.params.reshape(1))
         if launch_seconds is _DEFAULT:
             launch_seconds = GPU_LAUNCH_SECONDS if self.device.kind == "gpu" else None
         self.launch_seconds = launch_seconds
-        if tile:
-            self.tile = int(tile)
+        if launch_pixels:
+            self.launch_pixels = int(launch_pixels)
         elif launch_seconds is None:
-            self.tile = max(1, MAX_ITEMS // self.slots)
+            self.launch_pixels = max(1, MAX_ITEMS // self.slots)
         else:                       # start small; _launch grows it towards the time budget
-            self.tile = max(1, (MIN_ITEMS >> 2) // self.slots)
-        self.adaptive = launch_seconds is not None and not tile
+            self.launch_pixels = max(1, (MIN_ITEMS >> 2) // self.slots)
+        self.adaptive = launch_seconds is not None and not launch_pixels
         self.launches = 0
         n = self.slots * self.npix
-        self.sums = cl.Buffer(self.ctx, mf.READ_WRITE, 16 * n)
-        self.sums_sq = cl.Buffer(self.ctx, mf.READ_WRITE, 16 * n)
-        self.invalid = cl.Buffer(self.ctx, mf.READ_WRITE, 4 * n)
-        self.cutoffs = cl.Buffer(self.ctx, mf.READ_WRITE, 4 * n)
+        self.sums = cl.Buffer(ctx, mf.READ_WRITE, 16 * n)
+        self.sums_sq = cl.Buffer(ctx, mf.READ_WRITE, 16 * n)
+        self.invalid = cl.Buffer(ctx, mf.READ_WRITE, 4 * n)
+        self.cutoffs = cl.Buffer(ctx, mf.READ_WRITE, 4 * n)
+        self.spp_requested = 0
         self.reset()
+
+    def _get_program(self):
+        """The program for this render's feature set from the device's cache; a build, when this
+        render is the first to need it, is timed and logged (cold or warm, volcl.program)."""
+        builds = self.device.builds
+        self.program = self.device.program(self.features)
+        self.built = self.device.builds > builds
+        if self.built:
+            self.build_seconds = self.device.programs.seconds(self.features)
+            self.cold_build_seconds, self.build_was_cold = note_build(self.device.name, self.features,
+                                                                      self.build_seconds)
+        else:
+            self.build_seconds, self.cold_build_seconds, self.build_was_cold = 0.0, None, False
+
+    @property
+    def packed(self):
+        return self.prepared.packed
 
     def reset(self):
         for buf in (self.sums, self.sums_sq, self.invalid, self.cutoffs):
@@ -139,8 +145,8 @@ class Renderer:
         """sha256 of everything the kernel reads except the seed: two renderers with equal hashes
         (and equal seeds, features and kernel sources) compute the same samples."""
         h = hashlib.sha256()
-        for name in self.ARG_ORDER:
-            a = np.array(self.packed.arrays[name])
+        for name in ARG_ORDER:
+            a = np.array(self.params.reshape(1) if name == "params" else self.packed.arrays[name])
             if name == "params":
                 a["seed"] = 0
             h.update(name.encode())
@@ -148,29 +154,32 @@ class Renderer:
         return h.hexdigest()
 
     def _launch(self, sample_base: int, slots: int, accum):
-        """Samples sample_base .. sample_base + slots - 1 of every pixel, into slots 0 .. slots - 1
-        of the accumulators `accum`, in launches of `tile` pixels."""
+        """Samples sample_base .. sample_base + slots - 1 of every pixel of the tile, into slots
+        0 .. slots - 1 of the accumulators `accum`, in launches of `launch_pixels` pixels."""
+        args = self.uploaded.args(self.params_buffer)
+        t = self.tile
         first = 0
         while first < self.npix:
-            count = min(self.tile, self.npix - first)
-            self.kernel.set_args(*self.buffers, *accum,
-                                 np.uint32(sample_base), np.int32(first), np.int32(count), np.int32(slots))
+            count = min(self.launch_pixels, self.npix - first)
+            self.kernel.set_args(*args, *accum, np.uint32(sample_base), np.int32(t.x), np.int32(t.y),
+                                 np.int32(t.width), np.int32(self.npix), np.int32(first), np.int32(count),
+                                 np.int32(slots))
             t0 = time.perf_counter()
             event = cl.enqueue_nd_range_kernel(self.queue, self.kernel, (count * slots,), None)
             self.launches += 1
             if self.adaptive:
                 event.wait()
-                self._resize_tile(count * slots, time.perf_counter() - t0)
+                self._resize_launch(count * slots, time.perf_counter() - t0)
             first += count
 
-    def _resize_tile(self, items: int, seconds: float):
-        """Next launch's pixel count: aim at half the budget (tiles differ in cost across the
-        image), grow at most 2x per launch, shrink at once. Launch sizes are powers of two work
-        items, so a driver that compiles per launch size (PoCL does) sees few sizes."""
+    def _resize_launch(self, items: int, seconds: float):
+        """Next launch's pixel count: aim at half the budget (parts of the image differ in cost),
+        grow at most 2x per launch, shrink at once. Launch sizes are powers of two work items, so
+        a driver that compiles per launch size (PoCL does) sees few sizes."""
         rate = items / max(seconds, 1e-6)
         want = max(1.0, 0.5 * self.launch_seconds * rate)
         items_next = 1 << int(np.floor(np.log2(want)))
-        self.tile = int(np.clip(items_next // self.slots, 1, min(2 * self.tile, self.npix)))
+        self.launch_pixels = int(np.clip(items_next // self.slots, 1, min(2 * self.launch_pixels, self.npix)))
 
     def _pass(self, done: int, count: int):
         """Add samples done .. done + count - 1 (all in one round of the slots) to every pixel."""
@@ -185,7 +194,7 @@ class Renderer:
         n = count * self.npix
         mf = cl.mem_flags
         rows = [(self.sums, 16), (self.sums_sq, 16), (self.invalid, 4), (self.cutoffs, 4)]
-        scratch = [cl.Buffer(self.ctx, mf.READ_WRITE, size * n) for _, size in rows]
+        scratch = [cl.Buffer(self.device.ctx, mf.READ_WRITE, size * n) for _, size in rows]
         for (buf, size), tmp in zip(rows, scratch):
             cl.enqueue_copy(self.queue, tmp, buf, src_offset=size * first_slot * self.npix, byte_count=size * n)
         self._launch(done, count, scratch)
@@ -203,9 +212,13 @@ class Renderer:
           stop()        a callback returning true (checked between passes: signals, checkpoints).
         With none of spp, time_limit and target_error, the scene's own spp. RenderResult.stop_reason
         names the rule that ended it; progress(n) is called after each pass with the samples added."""
+        if self.prepared.version != self.version:
+            raise VolclError("the scene was updated after this render began, so its samples would mix two "
+                             "scenes; start a new render (volcl.render does) to see the update")
         if spp is None and time_limit is None and target_error is None:
             spp = self.scene.spp
         target = None if spp is None else self.samples_done + spp
+        self.spp_requested = target or 0
         check = None if target_error is None else _ErrorCheck(target_error, max(min_spp, 1))
         reason = "spp"
         t_start = time.perf_counter()
@@ -236,7 +249,8 @@ class Renderer:
         return result
 
     def state(self) -> dict:
-        """The accumulated state, raw: what a checkpoint stores to continue bit for bit."""
+        """The accumulated state, raw: what a checkpoint stores to continue bit for bit. `tile` is
+        (x, y, width, height); volcl.tiles.merge_states joins the states of tiles."""
         n = self.slots * self.npix
         sums = np.empty((n, 4), np.float32)
         sums_sq = np.empty((n, 4), np.float32)
@@ -247,15 +261,25 @@ class Renderer:
         cl.enqueue_copy(self.queue, invalid, self.invalid)
         cl.enqueue_copy(self.queue, cutoffs, self.cutoffs)
         self.queue.finish()
+        t = self.tile
         return {"sums": sums, "sums_sq": sums_sq, "invalid": invalid, "cutoffs": cutoffs,
                 "samples_done": self.samples_done, "seconds": self.seconds, "slots": self.slots,
-                "width": self.width, "height": self.height, "seed": self.seed}
+                "width": self.width, "height": self.height, "seed": self.seed,
+                "tile": (t.x, t.y, t.width, t.height)}
 
     def restore(self, state: dict):
-        """Continue from state() of a renderer of the same scene, seed and image size."""
+        """Continue from state() of a renderer of the same scene, seed and image size: of this
+        tile, or of the whole image (of which this tile's part is taken)."""
         for key in ("slots", "width", "height", "seed"):
             if int(state[key]) != getattr(self, key):
                 raise ValueError(f"state has {key} {int(state[key])}, this renderer {getattr(self, key)}")
+        whole = (0, 0, self.width, self.height)
+        held = tuple(int(v) for v in state.get("tile", whole))
+        mine = (self.tile.x, self.tile.y, self.tile.width, self.tile.height)
+        if held != mine:
+            if held != whole:
+                raise ValueError(f"state holds tile {held}, this renderer renders {mine}")
+            state = slice_state(state, self.tile)
         n = self.slots * self.npix
         arrays = [(self.sums, "sums", np.float32, (n, 4)), (self.sums_sq, "sums_sq", np.float32, (n, 4)),
                   (self.invalid, "invalid", np.uint32, (n,)), (self.cutoffs, "cutoffs", np.uint32, (n,))]
@@ -277,15 +301,19 @@ class Renderer:
         mean = s[:, :3] / safe
         sample_var = np.maximum(ss[:, :3] / safe - mean ** 2, 0) * safe / np.maximum(safe - 1, 1)
         var_mean = sample_var / safe
-        shape = (self.height, self.width, 3)
+        shape = (self.tile.height, self.tile.width, 3)
+        packed = self.packed
+        whole = self.tile.pixels == self.width * self.height
+        info = dict(self.prepared.info, estimator=self.estimator.describe(), kernel_sha256=sources_hash(),
+                    version=__version__, spp_requested=self.spp_requested)
         return RenderResult(
             image=mean.reshape(shape).astype(np.float32), variance=var_mean.reshape(shape).astype(np.float32),
             spp=self.samples_done, invalid=int(st["invalid"].sum()), seconds=self.seconds,
-            device=f"{self.device.key} {self.device.name}", features=self.packed.features,
+            device=self.device.label, features=self.features,
             build_seconds=self.build_seconds, tracking_cutoffs=int(st["cutoffs"].sum(dtype=np.uint64)),
-            stats={"triangles": self.packed.triangle_count, "spheres": self.packed.sphere_count,
-                   "bvh_seconds": self.packed.bvh_seconds, "features": describe(self.packed.features),
-                   **self.packed.stats})
+            stats={"triangles": packed.triangle_count, "spheres": packed.sphere_count,
+                   "bvh_seconds": packed.bvh_seconds, "features": describe(self.features), **packed.stats},
+            seed=self.seed, tile=None if whole else self.tile, image_size=(self.width, self.height), info=info)
 
 
 class _ErrorCheck:
@@ -309,11 +337,11 @@ class _ErrorCheck:
         return False
 
 
-def render(scene: Scene, spp: int | None = None, device=None, features=None, seed=None, progress=None,
+def render(scene, spp: int | None = None, device=None, features=None, seed=None, progress=None,
            time_limit=None, target_error=None, estimator: Estimator | None = None, majorant_cells=None,
-           majorant_scale=1.0) -> RenderResult:
+           majorant_scale=1.0, tile=None) -> RenderResult:
+    """One render with every knob the renderer has (tests and benchmarks use the feature
+    override and the majorant knobs); volcl.render is the documented entry point."""
     r = Renderer(scene, device=device, features=features, seed=seed, estimator=estimator,
-                 majorant_cells=majorant_cells, majorant_scale=majorant_scale)
-    if spp is None and time_limit is None and target_error is None:
-        spp = scene.spp
+                 majorant_cells=majorant_cells, majorant_scale=majorant_scale, tile=tile)
     return r.render(spp, progress=progress, time_limit=time_limit, target_error=target_error)

@@ -1,0 +1,133 @@
+"""The rules for parameter values, shared by the parsers and by volcl.traverse, so that a bad value
+gets the same message whether it comes from a file or from Python.
+
+Each function returns the checked value or raises CheckError with the message; the parsers add the
+file, line and element (Node.fail), volcl.params adds the parameter's key and where the object was
+defined.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import transform as tf
+
+# The kernels compute in float32: a value beyond its range would reach them as infinity.
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
+class CheckError(ValueError):
+    """A value that breaks a parameter's rule; the message says which rule and what was found."""
+
+
+def finite(what: str, value: float, text: str | None = None) -> float:
+    """A finite number within the float32 range ('what: text is not a finite number')."""
+    text = repr(value) if text is None else repr(text)
+    if not math.isfinite(value):
+        raise CheckError(f"{what}: {text} is not a finite number")
+    if abs(value) > FLOAT32_MAX:
+        raise CheckError(f"{what}: {text} is beyond the single-precision floating-point range volcl "
+                         f"renders in (|x| <= {FLOAT32_MAX:.7g})")
+    return value
+
+
+def positive(name: str, value: float) -> float:
+    if not value > 0:
+        raise CheckError(f"'{name}' must be > 0, got {value}")
+    return value
+
+
+def nonneg_color(name: str, value: np.ndarray) -> np.ndarray:
+    if (value < 0).any():
+        raise CheckError(f"'{name}' must be >= 0, got {value.tolist()}")
+    return value
+
+
+def unit_color(name: str, value: np.ndarray) -> np.ndarray:
+    if (value < 0).any() or (value > 1).any():
+        raise CheckError(f"'{name}' must lie in [0, 1], got {value.tolist()}")
+    return value
+
+
+def hg_g(name: str, g: float) -> float:
+    if not -1 < g < 1:
+        raise CheckError(f"'{name}' = {g} is outside the allowed range -1 < g < 1")
+    return g
+
+
+def volume_range(name: str, volume, upper: float | None) -> None:
+    """sigma_t values must be >= 0; albedo values must also be <= 1 (a Volume, const or grid)."""
+    values = volume.data if volume.kind == "grid" else volume.value
+    low, high = float(np.min(values)), float(np.max(values))
+    if low < 0 or (upper is not None and high > upper):
+        allowed = ">= 0" if upper is None else f"in [0, {upper:g}]"
+        found = f" in {volume.filename}" if volume.kind == "grid" else ""
+        raise CheckError(f"'{name}' values must be {allowed}; found values from {low:g} to "
+                         f"{high:g}{found}")
+
+
+def medium_limits(medium) -> None:
+    """Coefficients valid one by one can still overflow float32 once combined: sigma_t times
+    scale, and the emission sigma_a * radiance the kernels are given."""
+    from .model import Volume
+
+    def biggest(value):
+        return float(np.max(value.data if value.kind == "grid" else value.value)) \
+            if isinstance(value, Volume) else float(np.max(value))
+    sigma_t = biggest(medium.sigma_t) * medium.scale
+    limits = [("sigma_t (times scale)", sigma_t)]
+    if medium.radiance is not None:
+        limits.append(("the emission sigma_t * radiance", sigma_t * float(np.max(medium.radiance))))
+    for what, value in limits:
+        if not value <= FLOAT32_MAX:
+            raise CheckError(f"{what} reaches {value:.4g}, beyond the single-precision range "
+                             f"volcl renders in (<= {FLOAT32_MAX:.7g})")
+
+
+def invertible(name: str, m: np.ndarray) -> np.ndarray:
+    if not tf.is_invertible(m):
+        raise CheckError(f"transform '{name}' is singular or not finite (a scale of zero, or huge "
+                         f"values?)")
+    return m
+
+
+def camera_transform(to_world: np.ndarray) -> np.ndarray:
+    if not (np.abs(to_world) <= FLOAT32_MAX).all():
+        raise CheckError("the camera's transform places it beyond the single-precision floating-point "
+                         "range volcl renders in")
+    scale = tf.similarity_scale(to_world)
+    if scale is None or abs(scale - 1) > 1e-3:
+        # As in Mitsuba 3: ray directions and the field of view assume an unscaled frame.
+        raise CheckError("the camera's transform may rotate, translate and mirror, but not scale or shear")
+    return to_world
+
+
+def direction(value: np.ndarray) -> np.ndarray:
+    """A unit direction from a non-zero vector."""
+    d = tf.normalize(value)
+    if not np.any(d):
+        raise CheckError("the direction is the zero vector")
+    return d
+
+
+def shape_rules(shape, name: str) -> None:
+    """Rules for a finished shape (`name`: how messages call it) that no single parameter decides:
+    an area emitter needs a mesh with some area (in the float32 the kernels compute in; its
+    triangles are sampled by area), and an interior medium needs a closed, consistently wound mesh
+    around it (the kernels tell inside from outside by the side each triangle is crossed from)."""
+    from .. import mesh as meshes
+    if shape.kind != "mesh":
+        return
+    if shape.emitter_radiance is not None:
+        areas = meshes.triangle_areas32(shape.vertices, shape.faces)
+        if not areas.sum() > 0:
+            raise CheckError(f"{name} carries an area emitter but its mesh has zero total area (all "
+                             f"{len(areas)} triangles are degenerate in single precision): an emitter "
+                             f"needs triangles of positive area")
+    if shape.interior is not None:
+        problem = meshes.closure_problem(shape.vertices, shape.faces)
+        if problem is not None:
+            raise CheckError(f"{name} has an interior medium, but {problem}; a medium must be enclosed by "
+                             f"a closed, consistently wound mesh (close the mesh, or give an open surface "
+                             f"only an exterior medium)")
