@@ -104,19 +104,23 @@ def locate(explicit: str | None = None, variant: str | None = None, log=None) ->
 
 def render_mitsuba(scene: str, out: str | None, python: str, variant: str = DEFAULT_VARIANT,
                    spp: int = 256, seed: int = 0, defines: dict | None = None, repeat: int = 1,
-                   warmup: bool = True, timeout: float | None = 3600, details: bool = False):
+                   warmup: bool = True, timeout: float | None = 3600, details: bool = False,
+                   size: tuple | None = None):
     """Render `scene` with Mitsuba in a subprocess and write `out` (EXR; None: no file).
 
     Returns the best warm render seconds of `repeat` timed renders (after one untimed warm-up
     render unless warmup=False, in which case the single render's time includes JIT compilation).
     With details=True returns the whole result dict instead (seconds, first_seconds, all_seconds,
-    version, variant, mean, width, height)."""
+    version, variant, mean, width, height). size=(width, height) renders the first sensor's film at
+    that size instead of the file's (keep the aspect ratio: the field of view stays as loaded)."""
     cmd = [python, os.path.abspath(__file__), "--render", os.path.abspath(scene), "--variant", variant,
            "--spp", str(spp), "--seed", str(seed), "--repeat", str(repeat)]
     if out:
         cmd += ["--out", os.path.abspath(out)]
     if not warmup:
         cmd.append("--no-warmup")
+    if size:
+        cmd += ["--size", f"{size[0]}x{size[1]}"]
     for k, v in (defines or {}).items():
         cmd += ["-D", f"{k}={v}"]
     try:
@@ -144,6 +148,12 @@ def _render_here(args) -> dict:
     defines = parse_defines(args.define)
     # spp goes to mi.render, not load_file: Mitsuba rejects parameters a file does not use
     scene = mi.load_file(args.render, **defines)
+    if args.size:
+        width, height = (int(v) for v in args.size.split("x"))
+        params = mi.traverse(scene.sensors()[0])
+        params["film.size"] = [width, height]
+        params["film.crop_size"] = [width, height]
+        params.update()
 
     import resource
 
@@ -192,6 +202,7 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--repeat", type=int, default=1, help="timed warm renders; the best is reported")
     p.add_argument("--no-warmup", action="store_true", help="time the first render (includes JIT)")
+    p.add_argument("--size", metavar="WxH", help="render the film at this size")
     p.add_argument("-D", "--define", action="append", metavar="NAME=VALUE",
                    help="scene parameter (<default>) passed to mi.load_file")
     add_argument(p)

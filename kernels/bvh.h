@@ -9,6 +9,8 @@
 #ifndef VOLCL_BVH_H
 #define VOLCL_BVH_H
 
+#include "cylinder.h"   /* analytic cylinders (VOLCL_HAS_CYLINDERS) */
+
 /* Deepest stack a traversal can reach; volcl/bvh_wide.py STACK builds trees within it. */
 #define VOLCL_BVH_STACK 128
 
@@ -47,7 +49,7 @@ typedef int8 intL;
 
 typedef struct {
     float t;
-    int prim;       /* primitive code (LeafPacket.prim): >= 0 triangle, < 0 sphere */
+    int prim;       /* primitive code (LeafPacket.prim): >= 0 triangle, < 0 analytic (sphere or cylinder, cylinder.h) */
     float b1, b2;   /* barycentrics of p1 and p2 on triangles */
 } Hit;
 
@@ -171,16 +173,25 @@ inline bool sphere_intersect(__global const Sphere *sp, float3 o, float3 d, floa
     return true;
 }
 
-/* The analytic primitives of a packet (codes < 0), one by one after its triangles; returns as
- * packet_triangles_intersect does. */
+/* The analytic primitives of a packet (codes < 0: spheres and cylinders, cylinder.h), one by one
+ * after its triangles; returns as packet_triangles_intersect does. */
 inline int packet_analytic_intersect(const SceneData *sc, __global const LeafPacket *pk, float3 o, float3 d,
                                      int mode, Hit *hit) {
     int found = 0;
-#if VOLCL_HAS_SPHERES
+#if VOLCL_HAS_SPHERES || VOLCL_HAS_CYLINDERS
     for (int i = 0; i < VOLCL_LEAF_WIDTH; ++i) {
         int code = pk->prim[i];
+        if (code >= 0) continue;
+        int a = -code - 1;
         float t;
-        if (code < 0 && sphere_intersect(&sc->spheres[-code - 1], o, d, hit->t, &t)) {
+        bool h;
+#if VOLCL_HAS_CYLINDERS
+        if (analytic_is_cylinder(a))
+            h = cylinder_intersect(&sc->cylinders[a - VOLCL_CYLINDER_CODE_BASE], o, d, hit->t, &t);
+        else
+#endif
+            h = sphere_intersect(&sc->spheres[a], o, d, hit->t, &t);
+        if (h) {
             hit->t = t;
             hit->prim = code;
             hit->b1 = hit->b2 = 0.0f;

@@ -42,6 +42,15 @@ inline bool light_sample(const SceneData *sc, float3 ref, float u_pick, float2 u
 #if VOLCL_HAS_AREA_LIGHTS
     if (l->type == LIGHT_AREA) {
         float3 p, ng, ns;
+#if VOLCL_HAS_CYLINDERS
+        if (l->sphere >= 0 && analytic_is_cylinder(l->sphere)) {
+            __global const Cylinder *c = &sc->cylinders[l->sphere - VOLCL_CYLINDER_CODE_BASE];
+            float3 q = cylinder_local_sample(u);
+            p = affine_point(c->to_world, q);
+            ng = cylinder_world_normal(c, (float3)(q.x, q.y, 0.0f));
+            ns = ng;
+        } else
+#endif
 #if VOLCL_HAS_SPHERES
         if (l->sphere >= 0) {
             __global const Sphere *sp = &sc->spheres[l->sphere];

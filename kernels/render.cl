@@ -26,10 +26,12 @@
 #include "equiangular.h"
 #include "camera.h"
 #include "integrator.h"
+#include "direct.h"
 
 __kernel void render_pass(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
                           __global const Triangle *triangles, __global const TriangleNormals *normals,
-                          __global const Sphere *spheres, __global const ShapeInfo *shapes,
+                          __global const Sphere *spheres, __global const Cylinder *cylinders,
+                          __global const ShapeInfo *shapes,
                           __global const Bsdf *bsdfs, __global const Light *lights,
                           __global const float *light_tri_cdf, __global const int *light_tris,
                           __global const Medium *media, __global const GridVolume *grids,
@@ -45,14 +47,26 @@ __kernel void render_pass(__global const BvhWideNode *nodes, __global const Leaf
     int tp = first + gid % count;    /* the pixel's index in the tile */
     int px = tile_x + tp % tile_w, py = tile_y + tp / tile_w;
     int pixel = py * params->width + px;
-    SceneData sc = {nodes, leaves, triangles, normals, spheres, shapes, bsdfs, lights,
+    SceneData sc = {nodes, leaves, triangles, normals, spheres, cylinders, shapes, bsdfs, lights,
                     light_tri_cdf, light_tris, media, grids, grid_data, params};
     Rng rng = rng_init(params->seed, (uint)pixel, sample_base + (uint)slot);
     float3 o, d;
     float t_max;
-    camera_ray(&sc, filter_table, px, py, rng_next_float2(&rng), &o, &d, &t_max);
+    float2 u_pixel = rng_next_float2(&rng);
+    /* drawn only where a lens needs it, so other cameras keep their random sequences */
+#if VOLCL_HAS_THINLENS
+    float2 u_lens = rng_next_float2(&rng);
+#else
+    float2 u_lens = (float2)(0.0f);
+#endif
+    camera_ray(&sc, filter_table, px, py, u_pixel, u_lens, &o, &d, &t_max);
     uint cut = 0u;
-    float3 L = integrator_radiance(&sc, &rng, o, d, t_max, &cut);
+    float3 L;
+#if VOLCL_HAS_DIRECT
+    if (params->integrator == INTEGRATOR_DIRECT) L = direct_radiance(&sc, &rng, o, d, t_max);
+    else
+#endif
+    L = integrator_radiance(&sc, &rng, o, d, t_max, &cut);
     int out = slot * tile_pixels + tp;
     if (cut) cutoffs[out] += cut;
     if (isfinite(L.x) && isfinite(L.y) && isfinite(L.z) && L.x >= 0.0f && L.y >= 0.0f && L.z >= 0.0f) {

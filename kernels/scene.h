@@ -8,6 +8,7 @@ typedef struct {
     __global const Triangle *triangles;
     __global const TriangleNormals *normals;
     __global const Sphere *spheres;
+    __global const Cylinder *cylinders;
     __global const ShapeInfo *shapes;
     __global const Bsdf *bsdfs;
     __global const Light *lights;

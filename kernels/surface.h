@@ -16,6 +16,18 @@ typedef struct {
 __attribute__((always_inline))
 inline SurfacePoint surface_point(const SceneData *sc, const Hit *h, float3 o, float3 d) {
     SurfacePoint s;
+#if VOLCL_HAS_CYLINDERS
+    if (h->prim < 0 && analytic_is_cylinder(-h->prim - 1)) {
+        __global const Cylinder *c = &sc->cylinders[-h->prim - 1 - VOLCL_CYLINDER_CODE_BASE];
+        float3 l = cylinder_local_surface(c, o + h->t * d);
+        s.p = affine_point(c->to_world, l);
+        s.ng = cylinder_world_normal(c, (float3)(l.x, l.y, 0.0f));
+        s.ns = s.ng;
+        s.shape = c->shape;
+        s.mag = cylinder_magnitude(c);
+        return s;
+    }
+#endif
 #if VOLCL_HAS_SPHERES
     if (h->prim < 0) {
         __global const Sphere *sp = &sc->spheres[-h->prim - 1];

@@ -58,6 +58,15 @@ typedef struct {
     int pad0[2];
 } Sphere;
 
+/* Mitsuba's cylinder: the open unit cylinder x^2 + y^2 = 1, 0 <= z <= 1 of its own frame (cylinder.h). */
+typedef struct {
+    float to_world[12];     /* row-major 3x4 */
+    float to_object[12];    /* its inverse */
+    int shape;
+    int flip;       /* flip_normals: the outward normal points inward */
+    int pad0[2];
+} Cylinder;
+
 /* A shape's surface and media: what a hit on one of its primitives means. */
 typedef struct {
     int bsdf;
@@ -95,7 +104,8 @@ typedef struct {
     int type;
     int tri_start;  /* area light on a mesh: its triangles are light_tris[tri_start, tri_start + tri_count) */
     int tri_count;
-    int sphere;     /* area light on an analytic sphere: its index, else -1 */
+    int sphere;     /* area light on an analytic shape, else -1: a sphere's index, or a cylinder's index
+                     * plus VOLCL_CYLINDER_CODE_BASE (the analytic index of cylinder.h) */
     float value[3]; /* radiance (area, constant), intensity (point) or irradiance (directional) */
     float area;     /* total emitting area (area lights) */
     float position[3];  /* point light position */
@@ -151,6 +161,18 @@ typedef struct {
 #define EQUIANGULAR_TWO_SAMPLE 1    /* one equiangular and one distance sample per segment, both kept */
 #define EQUIANGULAR_ONE_SAMPLE 2    /* one of the two per segment, chosen at random */
 
+#define CAMERA_PERSPECTIVE 0
+#define CAMERA_THINLENS 1
+#define CAMERA_ORTHOGRAPHIC 2
+
+#define INTEGRATOR_PATH 0           /* the volumetric path tracer (integrator.h) */
+#define INTEGRATOR_DIRECT 1         /* Mitsuba's direct integrator (direct.h, VOLCL_HAS_DIRECT builds) */
+
+/* RenderParams.hide_emitters */
+#define HIDE_EMITTERS_OFF 0
+#define HIDE_EMITTERS_DARK 1        /* camera rays do not count emission, and shade the emitter's bsdf */
+#define HIDE_EMITTERS_SKIP 2        /* camera rays pass through area emitters (Mitsuba's path, volpath, direct) */
+
 /* Everything a sample pass needs besides the scene buffers. */
 typedef struct {
     float cam_to_world[12]; /* row-major 3x4: rotation/scale columns then translation */
@@ -175,6 +197,13 @@ typedef struct {
     int mis;                /* with nee: combine with BSDF / phase sampling by MIS (1) or not (0) */
     float majorant_scale;   /* every majorant is multiplied by this (>= 1; 1 = tight); a test knob */
     int equiangular;        /* EQUIANGULAR_*; read only by VOLCL_HAS_EQUIANGULAR builds (integrator.h) */
+    int camera_type;        /* CAMERA_* (camera.h) */
+    float aperture_radius;  /* thin lens */
+    float focus_distance;   /* thin lens: along the view axis */
+    float principal_point[2];   /* image-plane shift, in fractions of the image's width and height */
+    int emitter_samples;    /* direct integrator (direct.h) */
+    int bsdf_samples;
+    int integrator;         /* INTEGRATOR_* */
 } RenderParams;
 
 #endif

@@ -164,3 +164,43 @@ def test_render_grid_scene_reports_tracking_cutoffs(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "heterogeneous (48x48x48 grid, 1 channel, trilinear)" in r.stdout
     assert "VOLCL_HAS_GRID_MEDIA=1" in r.stdout
+
+
+MOMENT_SCENE = '''<scene version="2.0.0">
+<integrator type="moment"><integrator type="path"><integer name="max_depth" value="1"/></integrator></integrator>
+<sensor type="perspective"><float name="fov" value="20"/>
+    <transform name="to_world"><lookat origin="0, 0, 3" target="0, 0, 0" up="0, 1, 0"/></transform>
+    <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="6"/><rfilter type="box"/></film>
+    <sampler type="independent"><integer name="sample_count" value="3"/></sampler></sensor>
+<sensor type="orthographic">
+    <film type="hdrfilm"><integer name="width" value="5"/><integer name="height" value="4"/><rfilter type="box"/></film>
+    <sampler type="independent"><integer name="sample_count" value="2"/></sampler></sensor>
+<shape type="rectangle"><transform name="to_world"><scale value="5"/></transform>
+    <emitter type="area"><rgb name="radiance" value="0.5, 1, 2"/></emitter></shape>
+</scene>
+'''
+
+
+def test_moment_layer_sensor_choice_and_scene_spp_under_a_time_limit(tmp_path):
+    """Mitsuba's moment integrator: the image of the wrapped one, and the second moment of the
+    samples as m2.R/G/B (every sample sees the emitter: L^2 exactly); --sensor picks a sensor; a time
+    limit without --spp stops at the scene's own sample count."""
+    scene = tmp_path / "moment.xml"
+    scene.write_text(MOMENT_SCENE)
+    out = tmp_path / "m.exr"
+    r = volcl("render", scene, "-o", out, "--time-limit", 600, "-q")
+    assert r.returncode == 0, r.stderr
+    assert "2 sensors" in r.stderr and "--sensor" in r.stderr
+    img, attrs = read_image(out)
+    assert img.shape == (6, 8, 9)           # RGB, variance, m2
+    assert attrs["volcl:spp"] == 3 and attrs["volcl:stop_reason"] == "spp"
+    # channels come back in the EXR's order: R G B, m2.R/G/B, variance.R/G/B
+    assert np.allclose(img[..., :3], [0.5, 1, 2]) and np.allclose(img[..., 3:6], [0.25, 1, 4])
+    assert np.allclose(img[..., 6:9], 0)
+    r = volcl("render", scene, "-o", out, "--sensor", 1, "-q")
+    assert r.returncode == 0, r.stderr
+    assert "2 sensors" not in r.stderr
+    img, attrs = read_image(out)
+    assert img.shape[:2] == (4, 5) and attrs["volcl:spp"] == 2
+    r = volcl("render", scene, "-o", out, "--sensor", 2, "-q")
+    assert r.returncode == 2 and "0 to 1" in r.stderr

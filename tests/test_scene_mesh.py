@@ -126,9 +126,12 @@ OBJ_CASES = {
     # triangles, a quad and a pentagon in between, in file order
     "polygons.obj": "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 2 0\n"
                     "f 1 2 3\nf 1 2 3 4\nf 2 3 4\nf 1 3 4 5 2\nf 3 4 5\n",
-    # normals per corner, negative (relative) indices, texture coordinates skipped
+    # normals per corner, negative (relative) indices; texture coordinates on some corners only
     "normals.obj": "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\nvn 0 0 -1\n"
                    "f 1/1/1 2/1/2 3/1/1\nf -4//-2 -2//-1 -1//-2\n",
+    # texture coordinates on every corner: a shared position with two coordinates splits
+    "uvs.obj": "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0.25 0.5\n"
+               "f 1/1 2/2 3/3\nf 1/4 3/3 4/2\n",
     # objects and smoothing groups change nothing; a shared position with two normals splits
     "groups.obj": "o a\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nvn 1 0 0\ns 1\nf 1//1 2//1 3//1\n"
                   "o b\nv 0 0 1\nf 1//2 2//2 4//2\n",
@@ -138,7 +141,8 @@ OBJ_CASES = {
 @pytest.mark.parametrize("name", sorted(OBJ_CASES))
 def test_obj_reader_matches_trimesh_corner_for_corner(tmp_path, name):
     """volcl reads OBJ files itself (trimesh's import is slow); without material groups its result
-    is trimesh's, triangle by triangle: positions and normals of every corner, in the same order."""
+    is trimesh's, triangle by triangle: positions, normals and texture coordinates of every corner,
+    in the same order."""
     from trimesh.exchange.obj import load_obj
     path = tmp_path / name
     path.write_text(OBJ_CASES[name])
@@ -151,6 +155,9 @@ def test_obj_reader_matches_trimesh_corner_for_corner(tmp_path, name):
     if ours.normals is not None:
         np.testing.assert_array_equal(ours.normals[ours.faces], ref.normals[ref.faces] /
                                       np.linalg.norm(ref.normals[ref.faces], axis=-1, keepdims=True))
+    assert (ours.uvs is None) == (ref.uvs is None)
+    if ours.uvs is not None:
+        np.testing.assert_array_equal(ours.uvs[ours.faces], ref.uvs[ref.faces])
 
 
 @needs_nori

@@ -177,7 +177,11 @@ def load_scene(path, options: SceneOptions):
     """The volcl.Scene of a scene file, its warnings printed."""
     from .api import prepare
     from .scene import load
+    from .scene.model import Scene, select_sensor
     model = load(path, options.defines)
+    if options.sensor is not None and isinstance(model, Scene):
+        select_sensor(model, options.sensor)
+        model.warnings = [w for w in model.warnings if "volcl renders the first" not in w]
     return prepare(model, path, options.defines, options.width, options.height,
                    warn=lambda w: print(f"warning: {w}", file=sys.stderr))
 
@@ -190,8 +194,9 @@ def render_job(job: Job, device, stop: StopRequest, scene_options: SceneOptions,
     out = check_writable(job.output)
     scene = load_scene(job.scene, scene_options)
     defines = scene_options.defines
-    # --spp caps --time-limit and --target-error; without any of the three, the scene's spp applies
-    spp = render.spp or (None if render.time_limit or render.target_error else scene.spp)
+    # --spp caps --time-limit and --target-error; without it the scene's spp caps a time limit (the
+    # render stops at whichever comes first), while a target error runs until it is met
+    spp = render.spp or (None if render.target_error else scene.spp)
     estimator = render.estimator
     if not estimator.nee and any(e.kind in ("point", "directional") for e in scene.model.emitters):
         print(f"volcl: warning: {job.scene}: with --nee off, point and directional lights are never found (no "
@@ -251,7 +256,11 @@ def render_job(job: Job, device, stop: StopRequest, scene_options: SceneOptions,
     complete = result.complete
     if interval is not None and (not complete or output.keep_checkpoint):
         checkpoint.save(ckpt, renderer, ident, extra)
-    layers = {"variance": result.variance} if out.suffix.lower() == ".exr" else None
+    layers = None
+    if out.suffix.lower() == ".exr":
+        layers = {"variance": result.variance}
+        if scene.model.integrator.moment:   # Mitsuba's moment integrator: the samples' second moment too
+            layers["m2"] = result.second_moment
     write_image(out, result.image, result.metadata, layers)
     if complete and not output.keep_checkpoint and ckpt.is_file():
         ckpt.unlink()

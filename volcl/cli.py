@@ -23,7 +23,8 @@ def _defines(items):
 
 def _scene_options(args):
     from .options import SceneOptions
-    return SceneOptions(defines=_defines(args.define), width=args.width, height=args.height)
+    return SceneOptions(defines=_defines(args.define), width=args.width, height=args.height,
+                        sensor=getattr(args, "sensor", None))
 
 
 def _load(path, args):
@@ -99,7 +100,9 @@ def cmd_info(args):
     print(f"scene      {args.scene} ({scene.dialect} dialect)")
     print(f"camera     {cam.width}x{cam.height}, fov {cam.fov:g} ({cam.fov_axis}), filter {cam.rfilter.kind}")
     print(f"integrator {scene.integrator.kind}, max_depth {scene.integrator.max_depth}, spp {scene.spp}")
-    print(f"shapes     {len(scene.shapes)} ({packed.triangle_count} triangles, {packed.sphere_count} spheres)")
+    cylinders = packed.stats.get("cylinders", 0)
+    print(f"shapes     {len(scene.shapes)} ({packed.triangle_count} triangles, {packed.sphere_count} spheres"
+          + (f", {cylinders} cylinders)" if cylinders else ")"))
     kinds = ["area"] * sum(s.emitter_radiance is not None for s in scene.shapes) + [e.kind for e in scene.emitters]
     print(f"emitters   {len(kinds)}" + (f" ({', '.join(kinds)})" if kinds else ""))
     media_kinds = [m.kind + (f" ({_grid_text(m.sigma_t)})" if m.kind == "heterogeneous" else "") for m in scene.media]
@@ -173,6 +176,8 @@ def main(argv=None):
         sp.add_argument("--height", type=int)
         sp.add_argument("--device", help="device index P:D, name substring, 'cpu' or 'gpu' (default: $VOLCL_DEVICE)")
         sp.add_argument("--features", help="'all': compile every feature instead of only the scene's")
+        sp.add_argument("--sensor", type=int, metavar="N",
+                        help="render the scene's sensor N (0-based, in file order; default 0)")
         sp.add_argument("-v", "--verbose", action="store_true")
 
     def estimator_opts(sp):
@@ -201,7 +206,8 @@ def main(argv=None):
     r.add_argument("--keep-checkpoint", action="store_true",
                    help="keep the checkpoint of a finished render (to add samples later with --resume --spp)")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar (or progress lines in logs)")
-    r.add_argument("--time-limit", type=float, metavar="SECONDS", help="stop after this much render time")
+    r.add_argument("--time-limit", type=float, metavar="SECONDS",
+                   help="stop after this much render time (or at --spp, or the scene's spp, if sooner)")
     r.add_argument("--target-error", type=float, metavar="E",
                    help="stop once the image's estimated relative error is at most E (e.g. 0.02)")
     r.add_argument("--min-spp", type=int, default=16, metavar="N",

@@ -22,6 +22,10 @@ FLAGS = (
     "EMISSIVE_MEDIA",       # a medium that emits light
     "GRID_MEDIA",           # a heterogeneous medium: grid lookups, delta and ratio tracking
     "EQUIANGULAR",          # equiangular sampling towards point lights in homogeneous media
+    "CYLINDERS",            # analytic cylinder primitives (Mitsuba's cylinder)
+    "THINLENS",             # a thin-lens camera (depth of field)
+    "ORTHOGRAPHIC",         # an orthographic camera
+    "DIRECT",               # Mitsuba's direct integrator instead of the volumetric path tracer
 )
 
 
@@ -47,6 +51,10 @@ def detect(scene: Scene) -> dict[str, bool]:
     media = _media_of(scene)
     f = dict.fromkeys(FLAGS, False)
     f["SPHERES"] = any(s.kind == "sphere" for s in scene.shapes)
+    f["CYLINDERS"] = any(s.kind == "cylinder" for s in scene.shapes)
+    f["THINLENS"] = scene.camera.kind == "thinlens"
+    f["ORTHOGRAPHIC"] = scene.camera.kind == "orthographic"
+    f["DIRECT"] = scene.integrator.kind == "direct"
     f["SHADING_NORMALS"] = any(s.kind == "mesh" and s.normals is not None for s in scene.shapes)
     f["DIFFUSE"] = "diffuse" in bsdf_kinds
     f["DIELECTRIC"] = "dielectric" in bsdf_kinds
@@ -82,6 +90,11 @@ def _first_transition(scene: Scene, o: np.ndarray, d: np.ndarray):
     for s in scene.shapes:
         if s.interior is None and s.exterior is None:
             continue
+        if s.kind == "cylinder":
+            hit = _cylinder_hit(s, o, d, best_t)
+            if hit is not None:
+                best_t, best = hit
+            continue
         if s.kind == "sphere":
             oc = o - s.center
             b = oc @ d
@@ -112,6 +125,30 @@ def _first_transition(scene: Scene, o: np.ndarray, d: np.ndarray):
                 k = np.flatnonzero(hit)[np.argmin(t[hit])]
                 best_t, best = t[k], (s, float(np.cross(e1[k], e2[k]) @ d))
     return best
+
+
+def _cylinder_hit(s, o: np.ndarray, d: np.ndarray, best_t: float):
+    """(t, (shape, dot(d, ng))) of the nearest crossing of the open cylinder `s` closer than best_t,
+    or None; as kernels/cylinder.h, in the cylinder's own frame."""
+    inv = np.linalg.inv(s.cylinder)
+    lo, ld = inv[:3, :3] @ o + inv[:3, 3], inv[:3, :3] @ d
+    a = ld[0] ** 2 + ld[1] ** 2
+    if not a > 0:
+        return None
+    tc = -(lo[0] * ld[0] + lo[1] * ld[1]) / a
+    closest = lo[:2] + tc * ld[:2]
+    disc = 1.0 - closest @ closest
+    if disc < 0:
+        return None
+    h = np.sqrt(disc / a)
+    for t in (tc - h, tc + h):
+        z = lo[2] + t * ld[2]
+        if 1e-9 < t < best_t and 0 <= z <= 1:
+            p = lo + t * ld
+            n = inv[:3, :3].T @ np.array([p[0], p[1], 0.0])
+            n = -n if s.flip_normals else n
+            return t, (s, float(d @ n))
+    return None
 
 
 def medium_at(scene: Scene, point) -> object:

@@ -49,6 +49,13 @@ SPHERE = np.dtype([
     ("shape", np.int32), ("flip", np.int32), ("pad0", np.int32, 2),
 ])
 
+CYLINDER = np.dtype([
+    ("to_world", np.float32, 12), ("to_object", np.float32, 12),
+    ("shape", np.int32), ("flip", np.int32), ("pad0", np.int32, 2),
+])
+# analytic index of cylinder k (kernels/cylinder.h): BVH code -(index + 1), and Light.sphere
+CYLINDER_CODE_BASE = 1 << 30
+
 SHAPE_INFO = np.dtype([
     ("bsdf", np.int32), ("light", np.int32), ("interior", np.int32), ("exterior", np.int32),
     ("is_transition", np.int32), ("pad0", np.int32, 3),
@@ -98,12 +105,18 @@ RENDER_PARAMS = np.dtype([
     ("light_count", np.int32), ("env_light", np.int32), ("filter_size", np.int32),
     ("filter_radius", np.float32), ("seed", np.uint32), ("scene_radius", np.float32),
     ("scene_center", *f3), ("nee", np.int32), ("mis", np.int32), ("majorant_scale", np.float32),
-    ("equiangular", np.int32),
+    ("equiangular", np.int32), ("camera_type", np.int32), ("aperture_radius", np.float32),
+    ("focus_distance", np.float32), ("principal_point", np.float32, 2), ("emitter_samples", np.int32),
+    ("bsdf_samples", np.int32), ("integrator", np.int32),
 ])
+INTEGRATORS = {"path": 0, "direct": 1}
+CAMERA_TYPES = {"perspective": 0, "thinlens": 1, "orthographic": 2}
+HIDE_EMITTERS = {"off": 0, "dark": 1, "skip": 2}
 
 # name in kernels/types.h -> dtype, for the layout probe
 SHARED_STRUCTS = {
     "BvhWideNode": BVH_WIDE_NODE, "LeafPacket": LEAF_PACKET, "Triangle": TRIANGLE, "TriangleNormals": TRIANGLE_NORMALS, "Sphere": SPHERE,
+    "Cylinder": CYLINDER,
     "ShapeInfo": SHAPE_INFO, "Bsdf": BSDF, "Light": LIGHT, "Medium": MEDIUM, "GridVolume": GRID_VOLUME,
     "RenderParams": RENDER_PARAMS,
 }

@@ -1,9 +1,10 @@
-"""Triangle meshes: OBJ files (read here) and PLY files (read through trimesh), and the primitive
-shapes scenes name.
+"""Triangle meshes: OBJ files (read here), PLY files (read through trimesh), Mitsuba's .serialized
+files (volcl.serialized), and the primitive shapes scenes name.
 
 Everything here is in object space; volcl.scene places meshes in the world. A mesh is a
-`TriangleMesh` of float64 vertices (n, 3), int64 faces (m, 3) and optional per-vertex shading
-normals (n, 3), present only when the file itself stores them.
+`TriangleMesh` of float64 vertices (n, 3), int64 faces (m, 3), optional per-vertex shading
+normals (n, 3), present only when the file itself stores them, and optional texture coordinates
+(n, 2) where the file has them (kept for textures; the kernels do not read them yet).
 """
 from __future__ import annotations
 
@@ -22,19 +23,24 @@ class TriangleMesh(NamedTuple):
     vertices: np.ndarray
     faces: np.ndarray
     normals: Optional[np.ndarray] = None
+    uvs: Optional[np.ndarray] = None
 
 
-_FORMATS = ("obj", "ply")
+_FORMATS = ("obj", "ply", "serialized")
 
 
-def load_mesh(path: str, fmt: Optional[str] = None) -> TriangleMesh:
-    """Read a mesh file as `fmt` ('obj' or 'ply'; default: from the extension).
+def load_mesh(path: str, fmt: Optional[str] = None, shape_index: int = 0) -> TriangleMesh:
+    """Read a mesh file as `fmt` ('obj', 'ply' or 'serialized', shape number `shape_index`; default:
+    from the extension).
 
     Every problem with the file is a VolclError naming it.
     """
     ext = fmt or os.path.splitext(path)[1].lower().lstrip(".")
     if ext not in _FORMATS:
-        raise VolclError(f"unsupported mesh format '{ext}'; supported: obj, ply", file=path)
+        raise VolclError(f"unsupported mesh format '{ext}'; supported: obj, ply, serialized", file=path)
+    if ext == "serialized":
+        from .serialized import load_serialized
+        return load_serialized(path, shape_index)
     if not os.path.isfile(path):
         # Also refuses devices such as /dev/zero, which would never finish reading.
         raise VolclError("mesh file not found (or not a regular file)", file=path)
@@ -54,19 +60,20 @@ def load_mesh(path: str, fmt: Optional[str] = None) -> TriangleMesh:
 
 
 def _read_obj(data: bytes) -> TriangleMesh:
-    """An OBJ file's faces as one mesh (groups and objects joined, as Mitsuba does; materials and
-    texture coordinates skipped: volcl takes materials from the scene file, and the Nori meshes
-    name .mtl files that do not exist).
+    """An OBJ file's faces as one mesh (groups and objects joined, as Mitsuba does; materials
+    skipped: volcl takes materials from the scene file, and the Nori meshes name .mtl files that
+    do not exist).
 
     Read here rather than through trimesh, whose import (it pulls in scipy where that is
     installed) took longer than a whole small render. The result matches trimesh's OBJ loader
     corner for corner: faces in file order, a quad split into (0, 1, 2) and (2, 3, 0), larger
     polygons into a fan around their first corner, negative indices counted back from the
-    vertices defined so far, and one vertex per distinct (position, normal) pair, with shading
-    normals exactly when every corner of the file names one.
+    vertices defined so far, and one vertex per distinct (position, texture coordinate, normal)
+    triple, with shading normals (texture coordinates) exactly when every corner of the file
+    names one.
     """
-    positions, normal_rows = [], []
-    corner_v, corner_n, sizes = [], [], []
+    positions, normal_rows, uv_rows = [], [], []
+    corner_v, corner_t, corner_n, sizes = [], [], [], []
     for line in data.decode("utf-8", "replace").splitlines():
         tokens = line.split()
         if not tokens:
@@ -76,12 +83,16 @@ def _read_obj(data: bytes) -> TriangleMesh:
             positions.append(tokens[1:4])
         elif key == "vn":
             normal_rows.append(tokens[1:4])
+        elif key == "vt":
+            uv_rows.append((tokens[1:3] + ["0"])[:2])
         elif key == "f":
-            nv, nn = len(positions), len(normal_rows)
+            nv, nt, nn = len(positions), len(uv_rows), len(normal_rows)
             for corner in tokens[1:]:
                 idx = corner.split("/")
                 v = int(idx[0])
                 corner_v.append(v - 1 if v > 0 else nv + v)
+                vt = int(idx[1]) if len(idx) > 1 and idx[1] else 0
+                corner_t.append(vt - 1 if vt > 0 else (nt + vt if vt < 0 else -1))
                 n = int(idx[2]) if len(idx) > 2 and idx[2] else 0
                 corner_n.append(n - 1 if n > 0 else (nn + n if n < 0 else -1))
             sizes.append(len(tokens) - 1)
@@ -89,20 +100,25 @@ def _read_obj(data: bytes) -> TriangleMesh:
         raise ValueError("a v or vn line has fewer than three coordinates")
     pos = np.array(positions, dtype=np.float64).reshape(-1, 3)
     nrm = np.array(normal_rows, dtype=np.float64).reshape(-1, 3)
+    tex = np.array(uv_rows, dtype=np.float64).reshape(-1, 2)
     corners = _triangulate_polygons(np.array(sizes, dtype=np.int64))
     cv = np.array(corner_v, dtype=np.int64)[corners]
+    ct = np.array(corner_t, dtype=np.int64)[corners]
     cn = np.array(corner_n, dtype=np.int64)[corners]
     if len(cv) == 0:
         return TriangleMesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
     bad = (cv < 0) | (cv >= len(pos))
     with_normals = bool(len(cn)) and bool(np.all((cn >= 0) & (cn < len(nrm))))
-    keys = np.stack([cv, cn if with_normals else np.zeros_like(cn)], axis=-1).reshape(-1, 2)
+    with_uvs = bool(len(ct)) and bool(np.all((ct >= 0) & (ct < len(tex))))
+    keys = np.stack([cv, ct if with_uvs else np.zeros_like(ct), cn if with_normals else np.zeros_like(cn)],
+                    axis=-1).reshape(-1, 3)
     unique, inverse = np.unique(keys, axis=0, return_inverse=True)
     faces = inverse.reshape(-1, 3)
     if bad.any():
         faces[bad] = -1         # refused by _validated: faces that index missing vertices
     verts = pos[np.clip(unique[:, 0], 0, max(len(pos) - 1, 0))] if len(pos) else np.zeros((len(unique), 3))
-    return TriangleMesh(verts, faces.astype(np.int64), nrm[unique[:, 1]] if with_normals else None)
+    return TriangleMesh(verts, faces.astype(np.int64), nrm[unique[:, 2]] if with_normals else None,
+                        tex[unique[:, 1]] if with_uvs else None)
 
 
 def _triangulate_polygons(sizes: np.ndarray) -> np.ndarray:
@@ -144,22 +160,26 @@ def _quiet_trimesh():
 
 
 def _concatenate(parts: list[dict]) -> TriangleMesh:
-    vertices, faces, normals = [], [], []
+    vertices, faces, normals, uvs = [], [], [], []
     offset = 0
     for part in parts:
         v = np.asarray(part.get("vertices", np.zeros((0, 3))), dtype=np.float64).reshape(-1, 3)
         f = _triangulate(part.get("faces"))
         n = part.get("vertex_normals")
+        uv = getattr(part.get("visual"), "uv", None)
         vertices.append(v)
         faces.append(f + offset)
         normals.append(None if n is None else np.asarray(n, dtype=np.float64).reshape(-1, 3))
+        uvs.append(None if uv is None else np.asarray(uv, dtype=np.float64).reshape(-1, 2))
         offset += len(v)
     if not vertices:
         return TriangleMesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
-    # Shading normals only when every part has them; a partial set cannot be used consistently.
+    # Shading normals (and uvs) only when every part has them; a partial set cannot be used consistently.
     has_normals = all(n is not None and len(n) == len(v) for n, v in zip(normals, vertices))
+    has_uvs = all(uv is not None and len(uv) == len(v) for uv, v in zip(uvs, vertices))
     return TriangleMesh(np.concatenate(vertices), np.concatenate(faces),
-                        np.concatenate(normals) if has_normals else None)
+                        np.concatenate(normals) if has_normals else None,
+                        np.concatenate(uvs) if has_uvs else None)
 
 
 def _triangulate(faces) -> np.ndarray:
@@ -186,7 +206,7 @@ def _triangulate(faces) -> np.ndarray:
 
 
 def _validated(mesh: TriangleMesh, path: str) -> TriangleMesh:
-    v, f, n = mesh
+    v, f, n, uv = mesh
     if len(v) == 0 or len(f) == 0:
         raise VolclError("the mesh is empty (no triangles)", file=path)
     if not np.isfinite(v).all():
@@ -199,7 +219,61 @@ def _validated(mesh: TriangleMesh, path: str) -> TriangleMesh:
             raise VolclError("the mesh has zero-length or non-finite vertex normals; "
                              "fix the file or set face_normals=true", file=path)
         n = n / length[:, None]
-    return TriangleMesh(v, f, n)
+    if uv is not None and not np.isfinite(uv).all():
+        uv = None       # unusable texture coordinates are dropped, not fatal: nothing reads them yet
+    return TriangleMesh(v, f, n, uv)
+
+
+def validated(mesh: TriangleMesh, path: str) -> TriangleMesh:
+    """The checks every mesh file gets (volcl.serialized uses them too)."""
+    return _validated(mesh, path)
+
+
+def mitsuba_vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Smooth vertex normals as Mitsuba 3 computes them for a mesh file without normals
+    (Mesh::recompute_vertex_normals, after Thurmer and Wuthrich 1998): each vertex sums the unit
+    normals of its triangles, each weighted by the triangle's angle at that vertex, and normalizes.
+    Degenerate triangles add nothing; a vertex left with a zero sum gets Mitsuba's placeholder
+    (1, 0, 0), which only degenerate triangles use. Computed in float32 like Mitsuba."""
+    p = np.asarray(vertices, np.float32)[faces]                       # (m, 3 corners, 3)
+    n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]).astype(np.float64)
+    length = np.linalg.norm(n, axis=1)
+    valid = length > 0
+    n = n[valid] / length[valid, None]
+    p = p[valid].astype(np.float64)
+    sums = np.zeros((len(vertices), 3))
+    for corner in range(3):
+        a = p[:, (corner + 1) % 3] - p[:, corner]
+        b = p[:, (corner + 2) % 3] - p[:, corner]
+        a /= np.maximum(np.linalg.norm(a, axis=1, keepdims=True), 1e-300)
+        b /= np.maximum(np.linalg.norm(b, axis=1, keepdims=True), 1e-300)
+        angle = _unit_angle(a, b)
+        np.add.at(sums, faces[valid, corner], n * angle[:, None])
+    norm = np.linalg.norm(sums, axis=1)
+    out = np.tile([1.0, 0.0, 0.0], (len(vertices), 1))
+    ok = norm > 0
+    out[ok] = sums[ok] / norm[ok, None]
+    return out
+
+
+def _unit_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The angle between unit vectors, accurate also near 0 and pi (Mitsuba's unit_angle)."""
+    dot = (a * b).sum(axis=1)
+    near = 2.0 * np.arcsin(np.clip(0.5 * np.linalg.norm(a - b, axis=1), 0.0, 1.0))
+    far = np.pi - 2.0 * np.arcsin(np.clip(0.5 * np.linalg.norm(a + b, axis=1), 0.0, 1.0))
+    return np.where(dot >= 0, near, far)
+
+
+def normals_are_flat(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, tol: float = 1e-6) -> bool:
+    """Whether every triangle's interpolated shading normal is its own face normal (a planar mesh
+    with recomputed normals, say): such normals change nothing, and the kernels need not read them."""
+    p = np.asarray(vertices, np.float64)[faces]
+    ng = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    length = np.linalg.norm(ng, axis=1)
+    keep = length > 0
+    ng = ng[keep] / length[keep, None]
+    corner_normals = np.asarray(normals, np.float64)[faces[keep]]          # (m, 3, 3)
+    return bool(np.all(np.abs(corner_normals - ng[:, None, :]).max(axis=(1, 2)) <= tol))
 
 
 def triangle_areas32(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

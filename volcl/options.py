@@ -11,11 +11,13 @@ from .estimator import Estimator
 
 @dataclass(frozen=True)
 class SceneOptions:
-    """How each scene file is loaded: its <default> overrides and a film size that replaces the
-    scene's."""
+    """How each scene file is loaded: its <default> overrides, a film size that replaces the
+    scene's, and which of its sensors to render (0-based; None: the first, with a warning when
+    there are several)."""
     defines: dict = field(default_factory=dict)
     width: int | None = None
     height: int | None = None
+    sensor: int | None = None
 
     def __post_init__(self):
         for name in ("width", "height"):
@@ -26,8 +28,9 @@ class SceneOptions:
 
 @dataclass(frozen=True)
 class RenderOptions:
-    """How each scene is rendered. spp caps time_limit and target_error; with none of the three, the
-    scene's own spp applies. features: a feature set to compile instead of the scene's (None: the
+    """How each scene is rendered. spp caps time_limit and target_error; without spp the scene's own
+    spp caps time_limit (the render stops at whichever comes first), and target_error runs until it
+    is met. features: a feature set to compile instead of the scene's (None: the
     scene's)."""
     spp: int | None = None
     seed: int | None = None

@@ -1,13 +1,14 @@
 """A loaded scene turned into the flat arrays the kernels read (see kernels/types.h).
 
-Meshes become one triangle array, spheres their own array, and one BVH covers both. Objects that
+Meshes become one triangle array, spheres and cylinders arrays of their own, and one BVH covers them
+all. Objects that
 the scene shares (a bsdf or medium referenced twice) are stored once.
 
 A `Packer` holds what depends on the scene's structure only (which objects exist and which shape
 uses which bsdf, light and media: the indices the arrays refer to each other by) and packs the
 arrays in parts, so that an edited value (volcl.params) repacks only the part it lives in:
 
-    geometry   triangles, normals, spheres, BVH (nodes, leaves)     vertex positions, transforms
+    geometry   triangles, normals, spheres, cylinders, BVH (nodes, leaves) vertex positions, transforms
     lights     light records, area-light triangle CDFs              emitter values, geometry
     shapes     per-shape bsdf, light and media indices              structure only
     bsdfs      bsdf records                                         bsdf colours and IORs
@@ -29,12 +30,13 @@ from .features import detect
 from .grids import GridPacker
 from .mesh import triangle_areas32
 from .scene.model import Camera, Filter, Scene
+from .scene.shapes import cylinder_bounds
 
 FILTER_TABLE_SIZE = 4097
 
 # part -> the arrays it packs, in the order parts are packed (shapes name the lights)
 PARTS = {
-    "geometry": ("nodes", "leaves", "triangles", "normals", "spheres"),
+    "geometry": ("nodes", "leaves", "triangles", "normals", "spheres", "cylinders"),
     "lights": ("lights", "light_tri_cdf", "light_tris"),
     "shapes": ("shapes",),
     "bsdfs": ("bsdfs",),
@@ -42,7 +44,7 @@ PARTS = {
     "camera": ("filter_table",),
 }
 # the kernel's buffer arguments, in order (kernels/render.cl)
-ARG_ORDER = ("nodes", "leaves", "triangles", "normals", "spheres", "shapes", "bsdfs", "lights",
+ARG_ORDER = ("nodes", "leaves", "triangles", "normals", "spheres", "cylinders", "shapes", "bsdfs", "lights",
              "light_tri_cdf", "light_tris", "media", "grids", "grid_data", "params", "filter_table")
 
 
@@ -140,9 +142,22 @@ def filter_cdf_size(table: np.ndarray) -> int:
     return (len(table) + 1) // 2
 
 
+def hide_emitters_mode(scene: Scene) -> str:
+    """How camera rays treat emitters (kernels/types.h HIDE_EMITTERS_*): Mitsuba's path, volpath and
+    direct pass through area emitters when hiding them; volpathmis (and Nori) only skip their
+    emission."""
+    integ = scene.integrator
+    if not integ.hide_emitters:
+        return "off"
+    return "skip" if scene.dialect == "mitsuba" and integ.kind in ("path", "volpath", "direct") else "dark"
+
+
 def camera_tangents(cam: Camera) -> tuple[float, float]:
-    """tan(fov/2) along x and y from Mitsuba's fov_axis rules."""
+    """tan(fov/2) along x and y from Mitsuba's fov_axis rules; (1, height / width) for an
+    orthographic camera, whose frame spans x in [-1, 1]."""
     w, h = cam.width, cam.height
+    if cam.kind == "orthographic":
+        return 1.0, h / w
     t = math.tan(math.radians(cam.fov) / 2)
     axis = cam.fov_axis
     if axis == "smaller":
@@ -172,7 +187,11 @@ class Packer:
             [scene.camera.medium] + [m for s in scene.shapes for m in (s.interior, s.exterior)]
             + list(scene.media))
         self.sphere_shapes = [s for s in scene.shapes if s.kind == "sphere"]
-        self.sphere_of_shape = {id(s): i for i, s in enumerate(self.sphere_shapes)}
+        self.cylinder_shapes = [s for s in scene.shapes if s.kind == "cylinder"]
+        # analytic index of each analytic shape (kernels/cylinder.h): spheres, then cylinders from a base
+        self.analytic_of_shape = {id(s): i for i, s in enumerate(self.sphere_shapes)}
+        self.analytic_of_shape.update({id(s): layout.CYLINDER_CODE_BASE + i
+                                       for i, s in enumerate(self.cylinder_shapes)})
         self.first_tri, offset = {}, 0
         for s in scene.shapes:
             if s.kind == "mesh":
@@ -183,7 +202,7 @@ class Packer:
         self.bvh_seconds = 0.0
         self.bounds = (np.zeros(3), np.zeros(3))
         self.light_count, self.env_light, self.shape_light = 0, -1, {}
-        self.stats = {}
+        self.stats = {"cylinders": len(self.cylinder_shapes)}
 
     def medium_id(self, m) -> int:
         return -1 if m is None else self.medium_index[id(m)]
@@ -236,8 +255,13 @@ class Packer:
         for i, s in enumerate(self.sphere_shapes):
             spheres[i]["center"], spheres[i]["radius"] = s.center, s.radius
             spheres[i]["shape"], spheres[i]["flip"] = self.shape_index[id(s)], int(s.flip_normals)
+        cylinders = np.zeros(max(len(self.cylinder_shapes), 1), layout.CYLINDER)
+        for i, s in enumerate(self.cylinder_shapes):
+            cylinders[i]["to_world"] = s.cylinder[:3, :4].reshape(12)
+            cylinders[i]["to_object"] = np.linalg.inv(s.cylinder)[:3, :4].reshape(12)
+            cylinders[i]["shape"], cylinders[i]["flip"] = self.shape_index[id(s)], int(s.flip_normals)
 
-        # one BVH over triangles (codes >= 0) and spheres (codes < 0)
+        # one BVH over triangles (codes >= 0) and analytic shapes (codes < 0: -(analytic index + 1))
         lo = [tri_v.min(axis=1)] if ntri else []
         hi = [tri_v.max(axis=1)] if ntri else []
         codes = [np.arange(ntri, dtype=np.int32)]
@@ -247,14 +271,20 @@ class Packer:
             lo.append(c - r)
             hi.append(c + r)
             codes.append(-1 - np.arange(len(self.sphere_shapes), dtype=np.int32))
+        if self.cylinder_shapes:
+            boxes = [cylinder_bounds(s.cylinder) for s in self.cylinder_shapes]
+            lo.append(np.array([b[0] for b in boxes]))
+            hi.append(np.array([b[1] for b in boxes]))
+            codes.append((-1 - layout.CYLINDER_CODE_BASE - np.arange(len(self.cylinder_shapes))).astype(np.int32))
         codes = np.concatenate(codes)
         t0 = time.perf_counter()
         if len(codes):
             # shadow rays stop at the first opaque surface (kernels/bvh.h TRACE_SHADOW); a shape's
             # bsdf kind is structure, so the mask never needs repacking after an edit
             shape_opaque = np.array([s.bsdf.kind != "null" for s in self.scene.shapes], bool)
-            sphere_shape = np.array([self.shape_index[id(s)] for s in self.sphere_shapes], np.int64)
-            opaque = np.concatenate([shape_opaque[tri_shape], shape_opaque[sphere_shape]])
+            analytic_shape = np.array([self.shape_index[id(s)] for s in self.sphere_shapes + self.cylinder_shapes],
+                                      np.int64)
+            opaque = np.concatenate([shape_opaque[tri_shape], shape_opaque[analytic_shape]])
             nodes, leaves = device_bvh(codes, np.concatenate(lo), np.concatenate(hi), tri_v, opaque,
                                        max_leaf=self.max_leaf)
             self.bounds = (np.concatenate(lo).min(0), np.concatenate(hi).max(0))
@@ -263,7 +293,8 @@ class Packer:
             self.bounds = (np.zeros(3), np.zeros(3))
         self.bvh_seconds = time.perf_counter() - t0
         self.triangle_count = ntri
-        self.arrays.update(nodes=nodes, leaves=leaves, triangles=tris, normals=normals, spheres=spheres)
+        self.arrays.update(nodes=nodes, leaves=leaves, triangles=tris, normals=normals, spheres=spheres,
+                           cylinders=cylinders)
 
     def _pack_lights(self):
         """Area lights first (one per emitting shape), then the scene's other emitters."""
@@ -277,8 +308,12 @@ class Packer:
             rec["value"] = s.emitter_radiance
             rec["sphere"] = -1
             if s.kind == "sphere":
-                rec["sphere"] = self.sphere_of_shape[id(s)]
+                rec["sphere"] = self.analytic_of_shape[id(s)]
                 rec["area"] = 4 * math.pi * s.radius ** 2
+            elif s.kind == "cylinder":
+                # Mitsuba's area: 2 pi |to_world x| |to_world z| (exact for a circular cross-section)
+                rec["sphere"] = self.analytic_of_shape[id(s)]
+                rec["area"] = 2 * math.pi * np.linalg.norm(s.cylinder[:3, 0]) * np.linalg.norm(s.cylinder[:3, 2])
             else:
                 # areas of the float32 triangles the kernel samples: a sliver that collapses in
                 # float32 must not be picked (kernels/lights.h)
@@ -347,10 +382,15 @@ class Packer:
         params["tan_half"] = camera_tangents(cam)
         params["near_clip"], params["far_clip"] = cam.near_clip, cam.far_clip
         params["width"], params["height"] = cam.width, cam.height
+        params["camera_type"] = layout.CAMERA_TYPES[cam.kind]
+        params["aperture_radius"], params["focus_distance"] = cam.aperture_radius, cam.focus_distance
+        params["principal_point"] = cam.principal_point
         integ = self.scene.integrator
         params["max_depth"] = integ.max_depth
         params["rr_depth"] = integ.rr_depth
-        params["hide_emitters"] = int(integ.hide_emitters)
+        params["hide_emitters"] = layout.HIDE_EMITTERS[hide_emitters_mode(self.scene)]
+        params["emitter_samples"], params["bsdf_samples"] = integ.emitter_samples, integ.bsdf_samples
+        params["integrator"] = layout.INTEGRATORS["direct" if integ.kind == "direct" else "path"]
         params["specular_chains_only"] = int(integ.specular_chains_only)
         params["camera_medium"] = self.medium_id(cam.medium)
         params["light_count"] = self.light_count

@@ -281,8 +281,9 @@ def _shape_params(scene: ModelScene, s: Shape, prefix: str):
             moved = replace(s)
             place(moved, m)
             checks.shape_rules(moved, f"the shape '{prefix}'")
-            s.vertices, s.faces, s.normals = moved.vertices, moved.faces, moved.normals
+            s.vertices, s.faces, s.normals, s.uvs = moved.vertices, moved.faces, moved.normals, moved.uvs
             s.center, s.radius, s.to_world = moved.center, moved.radius, moved.to_world
+            s.cylinder, s.normal_matrix = moved.cylinder, moved.normal_matrix
         yield Param(f"{prefix}.to_world", "to_world", "transform", lambda: s.to_world.copy(), put_to_world,
                     ("geometry", "lights"), owner)
 
@@ -299,7 +300,7 @@ def _area_emitter_params(scene: ModelScene, s: Shape, prefix: str):
 
 def _camera_params(scene: ModelScene, cam: Camera, prefix: str):
     def put(m):
-        cam.to_world = checks.camera_transform(m)
+        cam.to_world = checks.camera_transform(m, cam.kind)
     yield Param(f"{prefix}.to_world", "to_world", "transform", lambda: np.array(cam.to_world, np.float64), put,
                 (), _owner("<sensor>", cam, "sensor"))
 

@@ -302,6 +302,7 @@ class Renderer:
         sample_var = np.maximum(ss[:, :3] / safe - mean ** 2, 0) * safe / np.maximum(safe - 1, 1)
         var_mean = sample_var / safe
         shape = (self.tile.height, self.tile.width, 3)
+        second_moment = (ss[:, :3] / safe).reshape(shape).astype(np.float32)
         packed = self.packed
         whole = self.tile.pixels == self.width * self.height
         info = dict(self.prepared.info, estimator=self.estimator.describe(), kernel_sha256=sources_hash(),
@@ -313,7 +314,8 @@ class Renderer:
             build_seconds=self.build_seconds, tracking_cutoffs=int(st["cutoffs"].sum(dtype=np.uint64)),
             stats={"triangles": packed.triangle_count, "spheres": packed.sphere_count,
                    "bvh_seconds": packed.bvh_seconds, "features": describe(self.features), **packed.stats},
-            seed=self.seed, tile=None if whole else self.tile, image_size=(self.width, self.height), info=info)
+            seed=self.seed, tile=None if whole else self.tile, image_size=(self.width, self.height), info=info,
+            second_moment=second_moment)
 
 
 class _ErrorCheck:

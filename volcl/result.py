@@ -34,6 +34,8 @@ class RenderResult:
     tile: Tile | None = None    # None: the whole image
     image_size: tuple = (0, 0)  # (width, height) of the whole image
     info: dict = field(default_factory=dict)   # metadata: scene file, -D values, estimator, kernels
+    # the mean of each pixel's squared samples (the layer Mitsuba's moment integrator asks for)
+    second_moment: np.ndarray | None = None
 
     @property
     def rel_error(self) -> float:
@@ -101,12 +103,16 @@ def merge(results: list, width: int | None = None, height: int | None = None) ->
                                  f"{getattr(r, attr)}); every tile needs the same")
     image = np.zeros((height, width, 3), np.float32)
     variance = np.zeros((height, width, 3), np.float32)
+    moments = None if any(r.second_moment is None for r in results) else np.zeros((height, width, 3), np.float32)
     for r, t in zip(results, tile_list):
         image[t.rows, t.columns] = r.image
         variance[t.rows, t.columns] = r.variance
+        if moments is not None:
+            moments[t.rows, t.columns] = r.second_moment
     devices = list(dict.fromkeys(r.device for r in results))
     reasons = list(dict.fromkeys(r.stop_reason for r in results))
-    return replace(first, image=image, variance=variance, tile=None, image_size=(width, height),
+    return replace(first, image=image, variance=variance, second_moment=moments, tile=None,
+                   image_size=(width, height),
                    invalid=sum(r.invalid for r in results), seconds=sum(r.seconds for r in results),
                    tracking_cutoffs=sum(r.tracking_cutoffs for r in results), device=", ".join(devices),
                    build_seconds=sum(r.build_seconds for r in results),

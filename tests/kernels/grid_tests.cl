@@ -18,11 +18,11 @@
 #define SCENE_ARGS                                                                                      \
     __global const BvhWideNode *nodes, __global const LeafPacket *leaves, __global const Triangle *triangles,   \
     __global const TriangleNormals *normals, __global const Sphere *spheres,                            \
-    __global const ShapeInfo *shapes, __global const Bsdf *bsdfs, __global const Light *lights,         \
+    __global const Cylinder *cylinders, __global const ShapeInfo *shapes, __global const Bsdf *bsdfs, __global const Light *lights,         \
     __global const float *light_tri_cdf, __global const int *light_tris, __global const Medium *media,  \
     __global const GridVolume *grids, __global const float *grid_data,                                  \
     __global const RenderParams *params, __global const float *filter_table
-#define SCENE_INIT {nodes, leaves, triangles, normals, spheres, shapes, bsdfs, lights, light_tri_cdf, \
+#define SCENE_INIT {nodes, leaves, triangles, normals, spheres, cylinders, shapes, bsdfs, lights, light_tri_cdf, \
                     light_tris, media, grids, grid_data, params}
 
 /* grid_lookup of descriptor `grid` at local points (3 floats each). */

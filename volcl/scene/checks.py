@@ -92,10 +92,14 @@ def invertible(name: str, m: np.ndarray) -> np.ndarray:
     return m
 
 
-def camera_transform(to_world: np.ndarray) -> np.ndarray:
+def camera_transform(to_world: np.ndarray, kind: str = "perspective") -> np.ndarray:
+    """An orthographic camera's transform may scale and shear (it sets the extent of the view, as in
+    Mitsuba); the others only rotate, translate and mirror."""
     if not (np.abs(to_world) <= FLOAT32_MAX).all():
         raise CheckError("the camera's transform places it beyond the single-precision floating-point "
                          "range volcl renders in")
+    if kind == "orthographic":
+        return to_world
     scale = tf.similarity_scale(to_world)
     if scale is None or abs(scale - 1) > 1e-3:
         # As in Mitsuba 3: ray directions and the field of view assume an unscaled frame.
@@ -114,20 +118,32 @@ def direction(value: np.ndarray) -> np.ndarray:
 def shape_rules(shape, name: str) -> None:
     """Rules for a finished shape (`name`: how messages call it) that no single parameter decides:
     an area emitter needs a mesh with some area (in the float32 the kernels compute in; its
-    triangles are sampled by area), and an interior medium needs a closed, consistently wound mesh
-    around it (the kernels tell inside from outside by the side each triangle is crossed from)."""
+    triangles are sampled by area)."""
     from .. import mesh as meshes
-    if shape.kind != "mesh":
+    if shape.kind != "mesh" or shape.emitter_radiance is None:
         return
-    if shape.emitter_radiance is not None:
-        areas = meshes.triangle_areas32(shape.vertices, shape.faces)
-        if not areas.sum() > 0:
-            raise CheckError(f"{name} carries an area emitter but its mesh has zero total area (all "
-                             f"{len(areas)} triangles are degenerate in single precision): an emitter "
-                             f"needs triangles of positive area")
-    if shape.interior is not None:
+    areas = meshes.triangle_areas32(shape.vertices, shape.faces)
+    if not areas.sum() > 0:
+        raise CheckError(f"{name} carries an area emitter but its mesh has zero total area (all "
+                         f"{len(areas)} triangles are degenerate in single precision): an emitter "
+                         f"needs triangles of positive area")
+
+
+def interior_gap(shape, name: str) -> str | None:
+    """Why a shape with an interior medium does not enclose it (a warning, not an error: Mitsuba
+    accepts such shapes too), or None. The kernels tell inside from outside by the side each surface
+    is crossed from, as Mitsuba does, so a gap lets paths in or out unseen."""
+    from .. import mesh as meshes
+    if shape.interior is None:
+        return None
+    if shape.kind == "cylinder":
+        problem = "a cylinder is an open tube (no end caps)"
+    elif shape.kind == "mesh":
         problem = meshes.closure_problem(shape.vertices, shape.faces)
-        if problem is not None:
-            raise CheckError(f"{name} has an interior medium, but {problem}; a medium must be enclosed by "
-                             f"a closed, consistently wound mesh (close the mesh, or give an open surface "
-                             f"only an exterior medium)")
+    else:
+        return None
+    if problem is None:
+        return None
+    return (f"{name} has an interior medium, but {problem}: as in Mitsuba, inside and outside are decided "
+            f"at each crossing by the side the ray crosses from, so paths can enter or leave the medium "
+            f"through the gaps without crossing a surface")

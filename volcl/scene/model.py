@@ -74,13 +74,18 @@ class Bsdf:
 
 @dataclass
 class Shape:
-    kind: str                        # 'mesh' | 'sphere'
+    """A shape in world space. Instancing (Mitsuba's shapegroup / instance) is to come as a shape
+    that refers to a shared group of shapes with its own to_world; nothing here assumes it cannot."""
+    kind: str                        # 'mesh' | 'sphere' | 'cylinder'
     bsdf: Bsdf
     vertices: Optional[np.ndarray] = None     # (n, 3) float64, world space
     faces: Optional[np.ndarray] = None        # (m, 3) int64
     normals: Optional[np.ndarray] = None      # (n, 3) world-space shading normals, or None
+    uvs: Optional[np.ndarray] = None          # (n, 2) texture coordinates from the mesh file, or None
     center: Optional[np.ndarray] = None       # sphere, world space
     radius: float = 0.0
+    cylinder: Optional[np.ndarray] = None     # cylinder: the 4x4 map of the unit cylinder (radius 1,
+                                              # z in [0, 1]) to the world, to_world @ local
     flip_normals: bool = False
     emitter_radiance: Optional[np.ndarray] = None   # area emitter on this shape
     interior: Optional[Medium] = None
@@ -88,11 +93,15 @@ class Shape:
     id: str = ""
     source: Optional[Source] = None
     # What the world-space fields were made from (volcl.scene.shapes places it again when the
-    # transform is edited): the object-space mesh (a volcl.mesh.TriangleMesh) or sphere
-    # (center, radius), the to_world matrix, and whether the file asked for face normals.
+    # transform is edited): the object-space mesh (a volcl.mesh.TriangleMesh), sphere
+    # (center, radius) or cylinder frame (4x4), the to_world matrix, whether the file asked for face
+    # normals, whether a mesh file without normals gets Mitsuba's computed ones, and the matrix
+    # its normals turn with where that is not to_world's inverse transpose (Mitsuba's rotate).
     local: object = None
     to_world: np.ndarray = field(default_factory=lambda: np.eye(4))
     face_normals: bool = False
+    smooth_normals: bool = False
+    normal_matrix: Optional[np.ndarray] = None
     emitter_id: str = ""             # the area emitter's own id, if it has one
 
 
@@ -115,8 +124,9 @@ class Filter:
 
 @dataclass
 class Camera:
+    kind: str = "perspective"        # 'perspective' | 'thinlens' | 'orthographic'
     to_world: np.ndarray = field(default_factory=lambda: np.eye(4))
-    fov: float = 40.0                # degrees, along fov_axis
+    fov: float = 40.0                # degrees, along fov_axis (perspective, thin lens)
     fov_axis: str = "x"              # 'x' | 'y' | 'diagonal' | 'smaller' | 'larger'
     width: int = 768
     height: int = 576
@@ -124,16 +134,31 @@ class Camera:
     far_clip: float = 1e4
     rfilter: Filter = field(default_factory=Filter)
     medium: Optional[Medium] = None
+    principal_point: tuple = (0.0, 0.0)   # Mitsuba's principal_point_offset_x/y, in image fractions
+    aperture_radius: float = 0.0     # thin lens
+    focus_distance: float = 0.0      # thin lens: distance along the view axis that is in focus
     id: str = ""
 
 
 @dataclass
+class Sensor:
+    """One of a scene's sensors: its camera and its sampler's settings."""
+    camera: Camera
+    spp: int = 4
+    seed: int = 0
+    source: Optional[Source] = None
+
+
+@dataclass
 class Integrator:
-    kind: str = "volpathmis"         # as written in the file
+    kind: str = "volpathmis"         # as written in the file ('direct': Mitsuba's direct integrator)
     max_depth: int = -1              # Mitsuba meaning: 1 = emitters only, 2 = direct lighting, -1 = unlimited
     rr_depth: int = 5
     hide_emitters: bool = False
     specular_chains_only: bool = False   # Nori 'whitted': diffuse vertices end after direct lighting
+    emitter_samples: int = 1         # 'direct': light samples per camera ray's first surface
+    bsdf_samples: int = 1            # 'direct': BSDF samples there
+    moment: bool = False             # Mitsuba's 'moment' wrapper: also write the second moment
 
 
 @dataclass
@@ -148,6 +173,27 @@ class Scene:
     emitters: list = field(default_factory=list)
     media: list = field(default_factory=list)       # every distinct medium referenced
     warnings: list = field(default_factory=list)
+    sensors: list = field(default_factory=list)     # every Sensor of the file; camera/spp/seed are one's
+    sensor_index: int = 0
+
+
+def select_sensor(scene: Scene, index: int) -> None:
+    """Render the scene through its sensor number `index` (0-based, in file order; Mitsuba's
+    mi.render(scene, sensor=index)): its camera, sample count and seed."""
+    from ..errors import VolclError
+    count = len(scene.sensors)
+    if not 0 <= index < max(count, 1):
+        raise VolclError(f"--sensor {index}: the scene has {count} sensor{'s' if count != 1 else ''} "
+                         f"(0 to {max(count - 1, 0)})", file=scene.path)
+    if not scene.sensors:
+        return
+    sensor = scene.sensors[index]
+    scene.camera, scene.spp, scene.seed, scene.sensor_index = sensor.camera, sensor.spp, sensor.seed, index
+    seen: dict = {}
+    for medium in [scene.camera.medium] + [m for s in scene.shapes for m in (s.interior, s.exterior)]:
+        if medium is not None:
+            seen.setdefault(id(medium), medium)
+    scene.media = list(seen.values())
 
 
 @dataclass

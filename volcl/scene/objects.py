@@ -5,7 +5,6 @@ IORs and the checks on media: the dialects differ in names and defaults, not in 
 """
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from typing import Optional
 
@@ -14,26 +13,31 @@ import numpy as np
 from .. import mesh as meshes
 from ..errors import VolclError
 from . import checks
-from .model import Bsdf, Camera, Filter, Phase, Volume
+from .model import Bsdf, Camera, Filter, Phase, Volume, rgb
 from .parse_common import Node
 from .volfile import read_vol
 from .xml import Element
 
-# Mitsuba 3's named IORs (its dielectric documentation lists these values).
+# Mitsuba 3.9's named IORs (include/mitsuba/render/ior.h: Hecht, Optics, at about 589 nm, as
+# float32 values), looked up case-insensitively.
 IOR_NAMES = {
-    "vacuum": 1.0,
-    "air": 1.000277,
-    "water": 1.3330,
-    "bk7": 1.5046,
-    "fused silica": 1.4585,
+    "vacuum": 1.0, "helium": 1.000036, "hydrogen": 1.000132, "air": 1.000277,
+    "carbon dioxide": 1.00045,
+    "water": 1.3330, "acetone": 1.36, "ethanol": 1.361, "carbon tetrachloride": 1.461,
+    "glycerol": 1.4729, "benzene": 1.501, "silicone oil": 1.52045, "bromine": 1.661,
+    "water ice": 1.31, "fused quartz": 1.458, "pyrex": 1.470, "acrylic glass": 1.49,
+    "polypropylene": 1.49, "bk7": 1.5046, "sodium chloride": 1.544, "amber": 1.55, "pet": 1.5750,
     "diamond": 2.419,
 }
+# Names volcl accepted before it had Mitsuba's whole table; Mitsuba 3 rejects them.
+_VOLCL_IOR_NAMES = {"fused silica": 1.4585}
 
 
 @dataclass
 class AreaLight:
-    """An area emitter waiting to be attached to the shape it sits in."""
+    """An area emitter waiting to be attached to the shape it sits in (or refers to)."""
     radiance: np.ndarray
+    attached: bool = False
 
 
 @dataclass
@@ -42,40 +46,53 @@ class Sampler:
     seed: int = 0
 
 
-def resolve_path(node: Node, name: str) -> str:
-    """A filename parameter, relative ones taken from the scene file's folder."""
+def resolve_path(node: Node, name: str, what: str = "file") -> str:
+    """A filename parameter: absolute, or found in the scene's search folders (its own folder, and in
+    the Mitsuba dialect the <path> folders before it)."""
     filename = node.string(name)
     if not filename:
         raise node.fail(name, f"'{name}' is empty")
-    return os.path.join(os.path.dirname(os.path.abspath(node.ctx.path)), filename)
+    resolver = node.ctx.resolver
+    found = resolver.resolve(filename)
+    if found is None:
+        raise node.fail(name, f"cannot load {what} '{filename}': file not found (looked in "
+                              f"{resolver.describe()})")
+    return found
 
 
-def mesh_from_file(node: Node, name: str, fmt: str) -> meshes.TriangleMesh:
-    path = resolve_path(node, name)
+def mesh_from_file(node: Node, name: str, fmt: str, shape_index: int = 0) -> meshes.TriangleMesh:
+    path = resolve_path(node, name, "mesh")
     try:
-        return meshes.load_mesh(path, fmt)
+        return meshes.load_mesh(path, fmt, shape_index)
     except VolclError as exc:
         raise node.fail(name, f"cannot load mesh '{node.string(name)}': {exc}") from None
 
 
-def grid_from_file(node: Node, name: str) -> tuple[np.ndarray, str]:
-    path = resolve_path(node, name)
+def grid_from_file(node: Node, name: str) -> tuple[np.ndarray, str, tuple]:
+    """(data, path, the file's bounding box (min, max)); the grid fills [0,1]^3 unless the Mitsuba
+    dialect's use_grid_bbox asks for that box."""
+    path = resolve_path(node, name, "volume")
     try:
-        data, _bbox = read_vol(path)     # the bbox is ignored: the grid fills [0,1]^3 (contract)
+        data, bbox = read_vol(path)
     except VolclError as exc:
         raise node.fail(name, f"cannot load volume '{node.string(name)}': {exc}") from None
-    return data, path
+    return data, path, bbox
 
 
-def default_bsdf() -> Bsdf:
-    """Both Mitsuba and Nori give a shape without a bsdf a diffuse reflectance of 0.5."""
-    return Bsdf(kind="diffuse")
+def default_bsdf(emitter: bool = False) -> Bsdf:
+    """A shape without a bsdf is diffuse with reflectance 0.5 in both dialects, except that
+    Mitsuba 3 makes it black on a shape that carries an emitter (src/render/shape.cpp)."""
+    return Bsdf(kind="diffuse", reflectance=rgb(0.0 if emitter else 0.5))
 
 
 def ior(node: Node, name: str, default: str | float) -> float:
     value = node.value(name, default)
     if isinstance(value, str):
         key = value.strip().lower()
+        if key in _VOLCL_IOR_NAMES:
+            node.ctx.warn(node.at(name), f"IOR name {value!r} is not in Mitsuba 3's table (Mitsuba 3 "
+                                         f"rejects it); volcl uses {_VOLCL_IOR_NAMES[key]}")
+            return _VOLCL_IOR_NAMES[key]
         if key not in IOR_NAMES:
             raise node.fail(name, f"unknown IOR name {value!r} for '{name}'; supported: "
                             + ", ".join(IOR_NAMES) + ", or a number")
@@ -104,8 +121,12 @@ def _shape_name(node: Node) -> str:
 
 
 def check_shape(node: Node, shape) -> None:
-    """Rules for a finished shape that no single parameter decides (volcl.scene.checks.shape_rules)."""
+    """Rules for a finished shape that no single parameter decides (volcl.scene.checks.shape_rules);
+    an interior medium that the shape does not enclose is a warning (checks.interior_gap)."""
     node.checked(None, checks.shape_rules, shape, _shape_name(node))
+    gap = checks.interior_gap(shape, _shape_name(node))
+    if gap is not None:
+        node.ctx.warn(node.element, gap)
 
 
 def check_medium(node: Node, medium) -> None:
@@ -114,9 +135,12 @@ def check_medium(node: Node, medium) -> None:
 
 
 def camera(node: Node, *, fov: float, fov_axis: str, width: int, height: int, near: float,
-           far: float, to_world: np.ndarray, rfilter: Filter, names: dict) -> Camera:
-    """Check and assemble a perspective camera; `names` maps field -> the dialect's parameter name."""
-    if not 0 < fov < 180:
+           far: float, to_world: np.ndarray, rfilter: Filter, names: dict, kind: str = "perspective"
+           ) -> Camera:
+    """Check and assemble a camera; `names` maps field -> the dialect's parameter name. An
+    orthographic camera has no field of view, and its to_world may scale (the scale sets the
+    extent of the view, as in Mitsuba)."""
+    if kind != "orthographic" and not 0 < fov < 180:
         raise node.fail(names["fov"], f"field of view {fov} must lie strictly between 0 and 180 "
                                       f"degrees")
     for field_name, value in (("width", width), ("height", height)):
@@ -126,8 +150,8 @@ def camera(node: Node, *, fov: float, fov_axis: str, width: int, height: int, ne
         raise node.fail(names["near"], f"near clip must be > 0, got {near}")
     if not far > near:
         raise node.fail(names["far"], f"far clip ({far}) must exceed near clip ({near})")
-    node.checked(names["to_world"], checks.camera_transform, to_world)
-    return Camera(to_world=to_world, fov=fov, fov_axis=fov_axis, width=width, height=height,
+    node.checked(names["to_world"], checks.camera_transform, to_world, kind)
+    return Camera(kind=kind, to_world=to_world, fov=fov, fov_axis=fov_axis, width=width, height=height,
                   near_clip=near, far_clip=far, rfilter=rfilter)
 
 

@@ -14,8 +14,9 @@ from typing import Callable, Mapping, Optional
 import numpy as np
 
 from ..errors import VolclError
-from . import checks
+from . import checks, spectra
 from .model import Source, rgb
+from .spectra import Spectrum
 from .properties import Prop, check_attrs, check_leaf, parse_property
 from .xml import Element
 
@@ -40,11 +41,13 @@ _KIND_NAMES = {
 
 @dataclass(frozen=True)
 class Spec:
-    """What one plugin accepts. `other_params='warn'` turns unknown parameters into warnings."""
+    """What one plugin accepts. `ignored` maps parameters that volcl reads past to what it does
+    instead (each a warning); `other_params='warn'` turns every unknown parameter into a warning."""
     params: Mapping[str, str] = field(default_factory=dict)
     children: frozenset = frozenset()
     attrs: tuple = ("type", "id", "name")
     other_params: str = "error"
+    ignored: Mapping[str, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -53,6 +56,7 @@ class Dialect:
     property_tags: frozenset
     specs: Mapping[str, Mapping[Optional[str], Spec]]     # tag -> type (None: untyped) -> Spec
     builders: Mapping[str, Callable]                       # tag -> fn(Node) -> object
+    rotate_axis_as_given: bool = False                     # Mitsuba: rotate does not normalize its axis
 
 
 @dataclass
@@ -65,12 +69,20 @@ class Child:
 
 
 class Context:
-    """Per-file parsing state: the dialect, ids seen so far, and the warnings collected."""
+    """Per-file parsing state: the dialect, the ids a <ref> can name, the objects built so far, the
+    folders filenames are looked up in, and the warnings collected.
 
-    def __init__(self, path: str, dialect: Dialect):
+    `elements` maps every id in the file (and its includes) to its element, so a <ref> may name an
+    object defined further down: the object is then built on first use, once, and reused when its
+    own turn in the file comes (`built`, keyed by element)."""
+
+    def __init__(self, path: str, dialect: Dialect, elements: Optional[dict] = None, resolver=None):
         self.path = path
         self.dialect = dialect
-        self.ids: dict[str, Child] = {}
+        self.elements: dict = dict(elements or {})
+        self.built: dict[int, Child] = {}
+        self.building: list = []        # elements being built, innermost last (reference cycles)
+        self.resolver = resolver
         self.warnings: list[str] = []
 
     def warn(self, el: Element, message: str) -> None:
@@ -96,7 +108,7 @@ def substitute_parameters(root: Element, defines: Mapping[str, str], default_par
     def walk(el: Element) -> None:
         kept = []
         for child in el.children:
-            _substitute_attrs(child, params, used)
+            substitute_attrs(child, params, used)
             if child.tag == "default":
                 if el.tag not in default_parents:
                     raise child.error("<default> is only allowed directly inside "
@@ -111,7 +123,7 @@ def substitute_parameters(root: Element, defines: Mapping[str, str], default_par
             walk(child)
         el.children = kept
 
-    _substitute_attrs(root, params, used)
+    substitute_attrs(root, params, used)
     walk(root)
     unused = sorted(fixed - used)
     if unused:
@@ -121,7 +133,7 @@ def substitute_parameters(root: Element, defines: Mapping[str, str], default_par
                          f"${unused[0]}; its parameters: {', '.join(declared)}", file=root.file)
 
 
-def _substitute_attrs(el: Element, params: Mapping[str, str], used: set) -> None:
+def substitute_attrs(el: Element, params: Mapping[str, str], used: set) -> None:
     for key, value in el.attrs.items():
         if "$" in value:
             el.attrs[key] = _substitute(el, key, value, params)
@@ -172,24 +184,31 @@ def plugin_spec(ctx: Context, el: Element) -> Spec:
 
 
 def read_object(ctx: Context, el: Element) -> Child:
-    """Check `el` against its Spec, read its parameters and children, build it, register its id."""
+    """Check `el` against its Spec, read its parameters and children, and build it (once: an object
+    a forward <ref> needed is built then and reused here)."""
+    done = ctx.built.get(id(el))
+    if done is not None:
+        return done
     spec = plugin_spec(ctx, el)
     check_attrs(el, (), spec.attrs)
-    node = Node(ctx, el, spec)
-    for child in el.children:
-        if child.tag in ctx.dialect.property_tags:
-            node.add_prop(parse_property(child))
-        elif child.tag == "ref":
-            node.add_child(resolve_ref(ctx, child))
-        elif child.tag in ctx.dialect.specs and child.tag in spec.children:
-            node.add_child(read_object(ctx, child))
-        else:
-            raise child.error(f"<{child.tag}> is not allowed inside <{el.label()}>; supported "
-                              f"here: {_supported_here(ctx, spec)}", element=child.tag)
-    obj = ctx.dialect.builders[el.tag](node)
+    ctx.building.append(el)
+    try:
+        node = Node(ctx, el, spec)
+        for child in el.children:
+            if child.tag in ctx.dialect.property_tags:
+                node.add_prop(parse_property(child, ctx.dialect.rotate_axis_as_given))
+            elif child.tag == "ref":
+                node.add_child(resolve_ref(ctx, child))
+            elif child.tag in ctx.dialect.specs and child.tag in spec.children:
+                node.add_child(read_object(ctx, child))
+            else:
+                raise child.error(f"<{child.tag}> is not allowed inside <{el.label()}>; supported "
+                                  f"here: {_supported_here(ctx, spec)}", element=child.tag)
+        obj = ctx.dialect.builders[el.tag](node)
+    finally:
+        ctx.building.pop()
     result = Child(el.tag, el.attrs.get("name", ""), obj, el)
-    if "id" in el.attrs:
-        register(ctx, el.attrs["id"], result)
+    ctx.built[id(el)] = result
     return result
 
 
@@ -201,23 +220,20 @@ def _supported_here(ctx: Context, spec: Spec) -> str:
     return ", ".join(items) or "nothing (no child elements)"
 
 
-def register(ctx: Context, ident: str, child: Child) -> None:
-    if ident in ctx.ids:
-        first = ctx.ids[ident].element
-        raise child.element.error(f"duplicate id '{ident}' (first used on line {first.line})")
-    ctx.ids[ident] = child
-
-
 def resolve_ref(ctx: Context, el: Element) -> Child:
     check_attrs(el, ("id",), ("name",))
     check_leaf(el)
     ident = el.attrs["id"]
-    target = ctx.ids.get(ident)
+    target = ctx.elements.get(ident)
     if target is None:
-        known = ", ".join(sorted(ctx.ids)) or "none"
-        raise el.error(f"reference to unknown id '{ident}' (ids must be defined before use; "
-                       f"defined so far: {known})")
-    return Child(target.tag, el.attrs.get("name", target.name), target.obj, el)
+        known = ", ".join(sorted(ctx.elements)) or "none"
+        raise el.error(f"reference to unknown id '{ident}' (ids in the scene: {known})")
+    if any(target is open_el for open_el in ctx.building):
+        chain = [b.attrs.get("id", f"<{b.label()}>") for b in ctx.building]
+        start = next(i for i, b in enumerate(ctx.building) if b is target)
+        raise el.error("circular reference: " + " -> ".join(chain[start:] + [ident]))
+    built = read_object(ctx, target)
+    return Child(built.tag, el.attrs.get("name", built.name), built.obj, el)
 
 
 class Node:
@@ -244,6 +260,10 @@ class Node:
     # -- collecting ---------------------------------------------------------------------------
 
     def add_prop(self, prop: Prop) -> None:
+        note = self.spec.ignored.get(prop.name)
+        if note is not None:
+            self.ctx.warn(prop.element, f"'{prop.name}' is ignored: {note}")
+            return
         kind = self.spec.params.get(prop.name)
         if kind is None:
             if self.spec.other_params == "warn":
@@ -308,14 +328,28 @@ class Node:
     def string(self, name: str, default: Optional[str] = None) -> str:
         return str(self.value(name, default))
 
-    def color(self, name: str, default=None) -> np.ndarray:
-        return rgb(self.value(name, default))
+    def color(self, name: str, default=None, kind: str = "reflectance") -> np.ndarray:
+        """A colour parameter as linear sRGB; a <spectrum> is converted as Mitsuba's RGB variants
+        convert it for a parameter of `kind` (volcl.scene.spectra: 'reflectance', 'unbounded' or
+        'emission')."""
+        value = self.value(name, default)
+        if isinstance(value, Spectrum):
+            where = self.at(name)
+            return spectra.to_rgb(value, kind, warn=lambda msg: self.ctx.warn(where, msg),
+                                  fail=lambda msg: where.error(f"'{name}': {msg}"))
+        return rgb(value)
 
     def point(self, name: str, default=None) -> np.ndarray:
         return np.asarray(self.value(name, default), dtype=np.float64).copy()
 
     def transform(self, name: str) -> np.ndarray:
         return np.array(self.value(name, np.eye(4)), dtype=np.float64)
+
+    def normal_matrix(self, name: str) -> Optional[np.ndarray]:
+        """The 3x3 matrix Mitsuba takes normals to the world with, where it is not the inverse
+        transpose of the transform (volcl.scene.properties.parse_transform); None elsewhere."""
+        prop = self.props.get(name)
+        return None if prop is None else prop.normal_matrix
 
     # -- validated reading --------------------------------------------------------------------
 
@@ -328,11 +362,11 @@ class Node:
             raise self.fail(name, f"'{name}' is {value!r}; supported: " + ", ".join(options))
         return value
 
-    def nonneg_color(self, name: str, default=None) -> np.ndarray:
-        return self.checked(name, checks.nonneg_color, name, self.color(name, default))
+    def nonneg_color(self, name: str, default=None, kind: str = "reflectance") -> np.ndarray:
+        return self.checked(name, checks.nonneg_color, name, self.color(name, default, kind))
 
-    def unit_color(self, name: str, default=None) -> np.ndarray:
-        return self.checked(name, checks.unit_color, name, self.color(name, default))
+    def unit_color(self, name: str, default=None, kind: str = "reflectance") -> np.ndarray:
+        return self.checked(name, checks.unit_color, name, self.color(name, default, kind))
 
     # -- children -----------------------------------------------------------------------------
 

@@ -1,55 +1,55 @@
-"""The Mitsuba 3 dialect (<scene version="3...">): its plugin table and the builders behind it.
+"""The Mitsuba dialect (<scene version="...">, versions 2.x and 3.x; volcl.scene.mitsuba_files has
+what happens to the file before this): its plugin table and the builders behind it.
 
-Defaults and rules follow Mitsuba 3's plugin documentation wherever the volcl contract is silent,
-so a file renders to the same expected image in both renderers. volcl's own extensions carry a
-`volcl_` prefix here so that Mitsuba reports them instead of misreading them.
+Defaults and rules follow Mitsuba 3.9 (its documentation, and its source where that is silent), so
+a file renders to the same expected image in both renderers, bugs included. volcl's own extensions
+carry a `volcl_` prefix here so that Mitsuba reports them instead of misreading them. Sensors live
+in mitsuba_sensors, shapes in mitsuba_shapes.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import numpy as np
 
-from . import checks, objects, transform as tf
-from .model import (Bsdf, Camera, Emitter, Filter, Integrator, Medium, Phase, Scene, Volume, rgb)
-from .objects import AreaLight, Sampler
+from . import checks, mitsuba_sensors, mitsuba_shapes, objects, transform as tf
+from .model import (Bsdf, Camera, Emitter, Integrator, Medium, Phase, Scene, Sensor, Volume, rgb,
+                    select_sensor)
+from .objects import AreaLight
 from .parse_common import Dialect, Node, Spec, medium_list
 from .properties import PROPERTY_TAGS
-from .shapes import PRIMITIVES, bounds, mesh_shape, sphere_shape
+from .shapes import bounds
 
 _TO_WORLD = {"to_world": "transform"}
 _MEDIUM_PARAMS = {"sigma_t": "color", "albedo": "color", "scale": "float",
-                  "volcl_radiance": "color"}
-_SAMPLER_PARAMS = {"sample_count": "int", "seed": "int"}
-_SHAPE_CHILDREN = frozenset({"bsdf", "emitter", "medium"})
+                  "has_spectral_extinction": "bool", "volcl_radiance": "color"}
+_MEDIUM_NOTES = {"sample_emitters": "volcl always samples emitters from medium vertices; the expected "
+                                    "image is the same, only the noise differs"}
+_PATH_PARAMS = {"max_depth": "int", "rr_depth": "int", "hide_emitters": "bool"}
+_INTEGRATOR_NOTES = {
+    "timeout": "volcl renders the scene's sample count; use --time-limit to stop after a time",
+    "samples_per_pass": "volcl chooses its own passes (the image does not depend on them)",
+    "block_size": "volcl chooses its own launch sizes (the image does not depend on them)",
+}
 
 SPECS = {
-    "scene": {None: Spec(attrs=("version",), children=frozenset(
-        {"integrator", "sensor", "shape", "bsdf", "emitter", "medium", "volume", "phase"}))},
-    "integrator": {kind: Spec({"max_depth": "int", "rr_depth": "int", "hide_emitters": "bool"})
-                   for kind in ("path", "volpath", "volpathmis")},
-    "sensor": {"perspective": Spec({"fov": "float", "fov_axis": "string", "near_clip": "float",
-                                    "far_clip": "float", **_TO_WORLD},
-                                   children=frozenset({"film", "sampler", "medium"}))},
-    "film": {"hdrfilm": Spec({"width": "int", "height": "int"}, children=frozenset({"rfilter"}),
-                             other_params="warn")},
-    "rfilter": {"box": Spec(), "gaussian": Spec({"stddev": "float"}),
-                "tent": Spec({"radius": "float"})},
-    # Mitsuba's other samplers are accepted with a warning and replaced by independent sampling.
-    "sampler": {"independent": Spec(_SAMPLER_PARAMS),
-                "stratified": Spec({**_SAMPLER_PARAMS, "jitter": "bool"}),
-                "multijitter": Spec({**_SAMPLER_PARAMS, "jitter": "bool"}),
-                "orthogonal": Spec({**_SAMPLER_PARAMS, "jitter": "bool", "strength": "int"}),
-                "ldsampler": Spec(_SAMPLER_PARAMS)},
-    "shape": {
-        **{kind: Spec({"filename": "string", "face_normals": "bool", "flip_normals": "bool",
-                       **_TO_WORLD}, children=_SHAPE_CHILDREN) for kind in ("obj", "ply")},
-        **{kind: Spec({"flip_normals": "bool", **_TO_WORLD}, children=_SHAPE_CHILDREN)
-           for kind in PRIMITIVES},
-        "sphere": Spec({"center": "point", "radius": "float", "flip_normals": "bool",
-                        **_TO_WORLD}, children=_SHAPE_CHILDREN),
+    # films, filters and samplers at the top level do nothing until a sensor refers to them by id
+    "scene": {None: Spec(attrs=("version", "id"), children=frozenset(
+        {"integrator", "sensor", "shape", "bsdf", "emitter", "medium", "volume", "phase", "film",
+         "rfilter", "sampler"}))},
+    "integrator": {
+        "path": Spec(_PATH_PARAMS, ignored=_INTEGRATOR_NOTES),
+        "volpath": Spec(_PATH_PARAMS, ignored=_INTEGRATOR_NOTES),
+        "volpathmis": Spec(_PATH_PARAMS, ignored={
+            **_INTEGRATOR_NOTES, "use_spectral_mis": "volcl renders RGB with its own channel mixture "
+                                                     "for distance sampling (same expected image)"}),
+        "direct": Spec({"emitter_samples": "int", "bsdf_samples": "int", "shading_samples": "int",
+                        "hide_emitters": "bool"}, ignored=_INTEGRATOR_NOTES),
+        "moment": Spec(children=frozenset({"integrator"})),
     },
+    **mitsuba_sensors.SPECS,
+    "shape": mitsuba_shapes.SPECS,
     "bsdf": {
         "diffuse": Spec({"reflectance": "color"}),
         "twosided": Spec(children=frozenset({"bsdf"})),
@@ -65,34 +65,19 @@ SPECS = {
         "constant": Spec({"radiance": "color"}),
     },
     "medium": {
-        "homogeneous": Spec(_MEDIUM_PARAMS, children=frozenset({"phase"})),
-        "heterogeneous": Spec(_MEDIUM_PARAMS, children=frozenset({"phase", "volume"})),
+        "homogeneous": Spec(_MEDIUM_PARAMS, children=frozenset({"phase"}), ignored=_MEDIUM_NOTES),
+        "heterogeneous": Spec(_MEDIUM_PARAMS, children=frozenset({"phase", "volume"}),
+                              ignored=_MEDIUM_NOTES),
     },
     "volume": {
-        "gridvolume": Spec({"filename": "string", "filter_type": "string", **_TO_WORLD}),
+        "gridvolume": Spec({"filename": "string", "filter_type": "string", "wrap_mode": "string",
+                            "use_grid_bbox": "bool", "max_value": "float", **_TO_WORLD},
+                           ignored={"raw": "in RGB rendering the grid's values are used as they are either way",
+                                    "accel": "volcl uses its own lookups (same values)"}),
         "constvolume": Spec({"value": "color", **_TO_WORLD}),
     },
     "phase": {"isotropic": Spec(), "hg": Spec({"g": "float"})},
 }
-
-# Mitsuba 3's perspective sensor without a fov uses a 50 mm lens on a 36 x 24 mm film, measured
-# along the diagonal.
-_DEFAULT_FOV = math.degrees(2.0 * math.atan(math.hypot(36.0, 24.0) / (2.0 * 50.0)))
-_FOV_AXES = ("x", "y", "diagonal", "smaller", "larger")
-
-
-@dataclass
-class Film:
-    width: int = 768
-    height: int = 576
-    # Mitsuba's default reconstruction filter: gaussian, stddev 0.5, radius 4 * stddev.
-    rfilter: Filter = field(default_factory=lambda: Filter("gaussian", radius=2.0, stddev=0.5))
-
-
-@dataclass
-class Sensor:
-    camera: Camera
-    sampler: Sampler
 
 
 # ---------------------------------------------------------------------------------------------
@@ -107,27 +92,36 @@ def build_scene(node: Node) -> Scene:
     if integrator is None:
         ctx.warn(node.element, "no <integrator>: using volpathmis (max_depth -1, rr_depth 5)")
     shapes = [c.obj for c in node.objects("shape")]
-    sensor = node.single("sensor")
-    sensor = sensor.obj if sensor else _default_sensor(node, shapes)
+    sensors = [c.obj for c in node.objects("sensor")] or [_default_sensor(node, shapes)]
+    if len(sensors) > 1:
+        ctx.warn(node.objects("sensor")[1].element,
+                 f"the scene has {len(sensors)} sensors; volcl renders the first (line "
+                 f"{sensors[0].source.line}) unless --sensor N picks another (0 to {len(sensors) - 1})")
     emitters = []
     for child in node.objects("emitter"):
         if isinstance(child.obj, AreaLight):
-            raise child.element.error("an area emitter must be placed inside the <shape> that "
-                                      "emits")
+            # as in Mitsuba: a surface emitter emits from the shapes that refer to it (by id)
+            if not child.obj.attached:
+                ctx.warn(child.element, "an area emitter at the top level emits only from the shapes "
+                                        "that refer to it (<ref id=...> inside a <shape>), and no shape "
+                                        "does: it emits nothing, as in Mitsuba")
+            continue
         emitters.append(child.obj)
-    camera, sampler = sensor.camera, sensor.sampler
-    return Scene(path=ctx.path, dialect="mitsuba",
-                 integrator=integrator.obj if integrator else Integrator(),
-                 camera=camera, spp=sampler.sample_count, seed=sampler.seed,
-                 shapes=shapes, emitters=emitters, media=medium_list(camera.medium, shapes),
-                 warnings=ctx.warnings[node.first_warning:])
+    scene = Scene(path=ctx.path, dialect="mitsuba",
+                  integrator=integrator.obj if integrator else Integrator(),
+                  shapes=shapes, emitters=emitters, sensors=sensors,
+                  warnings=ctx.warnings[node.first_warning:])
+    select_sensor(scene, 0)
+    _check_integrator(node, scene)
+    scene.warnings = ctx.warnings[node.first_warning:]
+    return scene
 
 
 def _default_sensor(node: Node, shapes) -> Sensor:
     """What Mitsuba 3 does without a sensor: 45 degrees, looking along +z at the whole scene."""
     node.ctx.warn(node.element, "no <sensor>: using Mitsuba's default perspective camera "
                                 "(fov 45, looking along +z at the scene's bounding box)")
-    camera = Camera(fov=45.0, fov_axis="x", rfilter=Film().rfilter)
+    camera = Camera(fov=45.0, fov_axis="x", rfilter=mitsuba_sensors.Film().rfilter)
     box = bounds(shapes)
     if box is not None and np.max(box[1] - box[0]) > 0:
         center, extents = (box[0] + box[1]) / 2, box[1] - box[0]
@@ -135,10 +129,66 @@ def _default_sensor(node: Node, shapes) -> Sensor:
         camera.far_clip = extents.max() * 5 + distance
         camera.near_clip = distance / 100
         camera.to_world = tf.translate([center[0], center[1], box[0][2] - distance])
-    return Sensor(camera, Sampler(4))
+    return Sensor(camera, 4, 0, node.source())
+
+
+def _check_integrator(node: Node, scene: Scene) -> None:
+    integ = scene.integrator
+    if integ.kind == "path":
+        _path_integrator(node, scene)
+    if integ.kind == "volpath" and integ.hide_emitters and scene.media:
+        node.ctx.warn(node.element, "hide_emitters with volpath and media: camera rays pass through area "
+                                    "emitters as in Mitsuba, but volcl samples the medium beyond them, "
+                                    "which Mitsuba's volpath skips")
+    if integ.kind != "direct":
+        return
+    delta = [e for e in scene.emitters if e.kind in ("point", "directional")]
+    if integ.emitter_samples > 1 and delta:
+        node.ctx.warn(node.element, f"direct with emitter_samples={integ.emitter_samples}: Mitsuba 3.9 counts "
+                                    f"each sample of a point or directional light at full weight, so these "
+                                    f"lights come out {integ.emitter_samples}x as bright as with one sample; "
+                                    f"volcl renders what Mitsuba renders")
+    # Mitsuba's direct integrator traces surfaces only: media are not sampled and a null boundary
+    # is shaded like a surface; volcl refuses rather than render something else
+    culprit = next((s for s in scene.shapes if s.bsdf.kind == "null" or s.interior or s.exterior), None)
+    if scene.media or culprit is not None:
+        where = culprit.source if culprit is not None else None
+        raise node.fail(None, "the 'direct' integrator with participating media or null boundaries"
+                        + (f" (first: {where})" if where else "")
+                        + ": Mitsuba's direct integrator ignores media and treats null boundaries as "
+                          "surfaces; use volpath (max_depth 2 for direct lighting)")
+
+
+def _path_integrator(node: Node, scene: Scene) -> None:
+    """Mitsuba's path integrator is a surface integrator: it ignores participating media, and counts
+    a crossing of a null surface as a bounce."""
+    if scene.media or any(s.camera.medium for s in scene.sensors):
+        node.ctx.warn(node.element, "Mitsuba's path integrator ignores participating media (volpath "
+                                    "renders them); volcl renders what Mitsuba renders, without them")
+        for shape in scene.shapes:
+            shape.interior = shape.exterior = None
+        for sensor in scene.sensors:
+            sensor.camera.medium = None
+        scene.media = []
+    if scene.integrator.max_depth >= 0 and any(s.bsdf.kind == "null" for s in scene.shapes):
+        node.ctx.warn(node.element, "Mitsuba's path integrator counts each crossing of a null surface as "
+                                    "a bounce towards max_depth, volcl does not: paths through null "
+                                    "surfaces can be longer in volcl than in Mitsuba (use volpath, which "
+                                    "counts as volcl does)")
+
+
+def _positive_count(node: Node, name: str, default: int) -> int:
+    value = node.int(name, default)
+    if value < 0:
+        raise node.fail(name, f"'{name}' must be >= 0, got {value}")
+    return value
 
 
 def build_integrator(node: Node) -> Integrator:
+    if node.type == "moment":
+        return _moment(node)
+    if node.type == "direct":
+        return _direct(node)
     max_depth = node.int("max_depth", -1)
     if max_depth < -1:
         raise node.fail("max_depth", f"'max_depth' must be -1 (unlimited) or >= 0, got {max_depth}")
@@ -149,100 +199,34 @@ def build_integrator(node: Node) -> Integrator:
                       hide_emitters=node.bool("hide_emitters", False))
 
 
-def build_sensor(node: Node) -> Sensor:
-    film = node.single("film")
-    film = film.obj if film else Film()
-    sampler = node.single("sampler")
-    medium = node.single("medium")
-    if node.has("fov"):
-        fov = node.float("fov")
-        fov_axis = node.string("fov_axis", "x").lower()
-        if fov_axis not in _FOV_AXES:
-            raise node.fail("fov_axis", f"'fov_axis' is {fov_axis!r}; supported: "
-                            + ", ".join(_FOV_AXES))
-    elif node.has("fov_axis"):
-        raise node.fail("fov_axis", "'fov_axis' needs a 'fov' to apply to")
-    else:
-        fov, fov_axis = _DEFAULT_FOV, "diagonal"
-    camera = objects.camera(node, fov=fov, fov_axis=fov_axis, width=film.width,
-                            height=film.height, near=node.float("near_clip", 1e-2),
-                            far=node.float("far_clip", 1e4), to_world=node.transform("to_world"),
-                            rfilter=film.rfilter,
-                            names={"fov": "fov", "width": None, "height": None,
-                                   "near": "near_clip", "far": "far_clip",
-                                   "to_world": "to_world"})
-    camera.medium = medium.obj if medium else None
-    camera.id = node.element.attrs.get("id", "")
-    return Sensor(camera, sampler.obj if sampler else Sampler(4))
+def _direct(node: Node) -> Integrator:
+    if node.has("shading_samples") and (node.has("emitter_samples") or node.has("bsdf_samples")):
+        raise node.fail("shading_samples", "give either 'shading_samples' or 'emitter_samples' / "
+                                           "'bsdf_samples', not both")
+    shading = _positive_count(node, "shading_samples", 1)
+    emitter_samples = _positive_count(node, "emitter_samples", shading)
+    bsdf_samples = _positive_count(node, "bsdf_samples", shading)
+    if emitter_samples + bsdf_samples == 0:
+        raise node.fail(None, "the direct integrator needs at least one emitter or bsdf sample")
+    # direct lighting: depth 2 in Mitsuba's counting, no Russian roulette within it
+    return Integrator(kind="direct", max_depth=2, rr_depth=1 << 30,
+                      hide_emitters=node.bool("hide_emitters", False),
+                      emitter_samples=emitter_samples, bsdf_samples=bsdf_samples)
 
 
-def build_film(node: Node) -> Film:
-    rfilter = node.single("rfilter")
-    film = Film(node.int("width", 768), node.int("height", 576))
-    if rfilter is not None:
-        film.rfilter = rfilter.obj
-    for name in ("width", "height"):
-        if getattr(film, name) < 1:
-            raise node.fail(name, f"film {name} must be >= 1, got {getattr(film, name)}")
-    return film
-
-
-def build_rfilter(node: Node) -> Filter:
-    if node.type == "gaussian":
-        stddev = node.positive("stddev", 0.5)
-        return Filter("gaussian", radius=4.0 * stddev, stddev=stddev)
-    if node.type == "tent":
-        return Filter("tent", radius=node.positive("radius", 1.0))
-    return Filter("box", radius=0.5)
-
-
-def build_sampler(node: Node) -> Sampler:
-    if node.type != "independent":
-        node.ctx.warn(node.element, f"sampler '{node.type}' is not supported; rendering with "
-                                    f"independent sampling")
-    return Sampler(objects.sample_count(node, "sample_count", 4), node.int("seed", 0))
-
-
-# ---------------------------------------------------------------------------------------------
-
-def build_shape(node: Node):
-    bsdf = node.single("bsdf")
-    bsdf = bsdf.obj if bsdf else objects.default_bsdf()
-    to_world = node.transform("to_world")
-    flip = node.bool("flip_normals", False)
-    if node.type == "sphere":
-        radius = node.positive("radius", 1.0)
-        shape = sphere_shape(node.point("center", np.zeros(3)), radius, to_world, bsdf=bsdf,
-                             source=node.source(), where=node.at("to_world"), flip_normals=flip)
-    else:
-        if node.type in PRIMITIVES:
-            mesh = PRIMITIVES[node.type]()
-        else:
-            mesh = objects.mesh_from_file(node, "filename", node.type)
-        shape = mesh_shape(mesh, to_world, bsdf=bsdf, source=node.source(),
-                           where=node.at("to_world"), face_normals=node.bool("face_normals", False), flip_normals=flip)
-    _attach_emitter_and_media(node, shape)
-    objects.check_shape(node, shape)
-    shape.id = node.element.attrs.get("id", "")
-    return shape
-
-
-def _attach_emitter_and_media(node: Node, shape) -> None:
-    emitter = node.single("emitter")
-    if emitter is not None:
-        if not isinstance(emitter.obj, AreaLight):
-            raise emitter.element.error("only an area emitter can be attached to a shape; "
-                                        "point, directional and constant emitters go directly "
-                                        "inside <scene>")
-        shape.emitter_radiance = emitter.obj.radiance
-        shape.emitter_id = emitter.element.attrs.get("id", "")
-    for child in node.objects("medium"):
-        if child.name not in ("interior", "exterior"):
-            raise child.element.error(f"a medium inside a shape needs name=\"interior\" or "
-                                      f"name=\"exterior\", got name={child.name!r}")
-        if getattr(shape, child.name) is not None:
-            raise child.element.error(f"the shape already has an {child.name} medium")
-        setattr(shape, child.name, child.obj)
+def _moment(node: Node) -> Integrator:
+    inner = node.objects("integrator")
+    if not inner:
+        raise node.fail(None, "the moment integrator wraps an integrator, found none")
+    if inner[0].obj.moment:
+        raise inner[0].element.error("a moment integrator inside a moment integrator is not supported")
+    for extra in inner[1:]:
+        node.ctx.warn(extra.element, "the moment integrator wraps several integrators; volcl renders the "
+                                     "first one only (its image is Mitsuba's image too)")
+    node.ctx.warn(node.element, "moment: volcl renders the wrapped integrator and writes the second "
+                                "moment of each pixel's samples as the EXR layer m2.R/G/B (linear RGB; "
+                                "Mitsuba writes its moments as XYZ layers)")
+    return replace(inner[0].obj, moment=True)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -278,8 +262,8 @@ def _conductor(node: Node) -> Bsdf:
     bsdf = Bsdf("conductor", specular_reflectance=node.nonneg_color("specular_reflectance", 1.0))
     if node.has("eta") or node.has("k"):
         # Mitsuba's defaults when either is given: eta 0, k 1 (which is itself a perfect mirror).
-        bsdf.eta = node.nonneg_color("eta", 0.0)
-        bsdf.k = node.nonneg_color("k", 1.0)
+        bsdf.eta = node.nonneg_color("eta", 0.0, kind="unbounded")
+        bsdf.k = node.nonneg_color("k", 1.0, kind="unbounded")
     return bsdf
 
 
@@ -307,7 +291,7 @@ def _point(node: Node) -> Emitter:
         position = node.point("position")
     else:
         position = tf.apply_point(node.transform("to_world"), np.zeros(3))
-    return Emitter("point", node.nonneg_color("intensity", 1.0), position=position,
+    return Emitter("point", node.nonneg_color("intensity", 1.0, kind="emission"), position=position,
                    source=node.source())
 
 
@@ -318,15 +302,15 @@ def _directional(node: Node) -> Emitter:
     else:
         direction = tf.apply_vector(node.transform("to_world"), [0.0, 0.0, 1.0])
     direction = node.checked("direction", checks.direction, direction)
-    return Emitter("directional", node.nonneg_color("irradiance", 1.0), direction=direction,
+    return Emitter("directional", node.nonneg_color("irradiance", 1.0, kind="emission"), direction=direction,
                    source=node.source())
 
 
 _EMITTERS = {
-    "area": lambda node: AreaLight(node.nonneg_color("radiance", 1.0)),
+    "area": lambda node: AreaLight(node.nonneg_color("radiance", 1.0, kind="emission")),
     "point": _point,
     "directional": _directional,
-    "constant": lambda node: Emitter("constant", node.nonneg_color("radiance", 1.0),
+    "constant": lambda node: Emitter("constant", node.nonneg_color("radiance", 1.0, kind="emission"),
                                      source=node.source()),
 }
 
@@ -357,11 +341,29 @@ def build_medium(node: Node) -> Medium:
                                         "to_world), as in Mitsuba 3; a homogeneous medium fills its shape")
     medium = Medium(kind=node.type, sigma_t=sigma_t, albedo=albedo,
                     scale=node.positive("scale", 1.0), phase=phase.obj if phase else Phase(),
-                    radiance=node.nonneg_color("volcl_radiance") if node.has("volcl_radiance")
-                    else None,
+                    radiance=node.nonneg_color("volcl_radiance", kind="emission")
+                    if node.has("volcl_radiance") else None,
                     id=node.element.attrs.get("id", ""), source=node.source())
     objects.check_medium(node, medium)
+    _spectral_extinction(node, medium)
     return medium
+
+
+def _spectral_extinction(node: Node, medium: Medium) -> None:
+    """Mitsuba's has_spectral_extinction=false skips the per-channel weighting of distance sampling:
+    right for a grey extinction (where the flag only saves work), a different image otherwise."""
+    if not node.has("has_spectral_extinction"):
+        return
+    from ..features import _chromatic
+    where = node.at("has_spectral_extinction")
+    if node.bool("has_spectral_extinction") or not _chromatic(medium.sigma_t):
+        node.ctx.warn(where, "'has_spectral_extinction' is ignored: volcl compiles the chromatic-extinction "
+                             "code only where the extinction differs between channels (same image)")
+    else:
+        node.ctx.warn(where, "has_spectral_extinction=false with an extinction that differs between colour "
+                             "channels: Mitsuba then samples distances as if every channel had the sampled "
+                             "channel's extinction (a different image); volcl renders the chromatic "
+                             "extinction as given")
 
 
 def _named_volumes(node: Node) -> dict:
@@ -387,9 +389,23 @@ def _volume_param(node: Node, volumes: dict, name: str, default: float, upper) -
 
 def build_volume(node: Node) -> Volume:
     if node.type == "constvolume":
-        return Volume("const", value=node.color("value", 1.0), to_world=node.transform("to_world"))
-    data, path = objects.grid_from_file(node, "filename")
-    return Volume("grid", value=rgb(0.0), data=data, to_world=node.transform("to_world"),
+        return Volume("const", value=node.color("value", 1.0, kind="unbounded"),
+                      to_world=node.transform("to_world"))
+    node.choice("wrap_mode", ("clamp",), "clamp")
+    data, path, bbox = objects.grid_from_file(node, "filename")
+    to_world = node.transform("to_world")
+    if node.bool("use_grid_bbox", False):
+        # the grid fills the box stored in its file instead of the unit cube, before to_world
+        lo, hi = bbox
+        if not np.all(hi > lo):
+            raise node.fail("use_grid_bbox", f"use_grid_bbox: the bounding box in {path} is empty "
+                                             f"({lo.tolist()} to {hi.tolist()})")
+        to_world = to_world @ tf.translate(lo) @ tf.scale(hi - lo)
+    if node.has("max_value"):
+        node.ctx.warn(node.at("max_value"), "'max_value' is ignored: volcl bounds the grid by its own "
+                                            "majorants (Mitsuba's image is biased if max_value is below the "
+                                            "grid's largest value)")
+    return Volume("grid", value=rgb(0.0), data=data, to_world=to_world,
                   filter=node.choice("filter_type", ("trilinear", "nearest"), "trilinear"),
                   filename=path)
 
@@ -403,9 +419,11 @@ DIALECT = Dialect(
     property_tags=PROPERTY_TAGS - {"color"},
     specs=SPECS,
     builders={
-        "scene": build_scene, "integrator": build_integrator, "sensor": build_sensor,
-        "film": build_film, "rfilter": build_rfilter, "sampler": build_sampler,
-        "shape": build_shape, "bsdf": build_bsdf, "emitter": build_emitter,
+        "scene": build_scene, "integrator": build_integrator,
+        "sensor": mitsuba_sensors.build_sensor, "film": mitsuba_sensors.build_film,
+        "rfilter": mitsuba_sensors.build_rfilter, "sampler": mitsuba_sensors.build_sampler,
+        "shape": mitsuba_shapes.build_shape, "bsdf": build_bsdf, "emitter": build_emitter,
         "medium": build_medium, "volume": build_volume, "phase": build_phase,
     },
+    rotate_axis_as_given=True,
 )

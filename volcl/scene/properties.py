@@ -14,6 +14,7 @@ import numpy as np
 
 from .checks import FLOAT32_MAX, CheckError, finite, invertible
 from . import transform as tf
+from .spectra import Spectrum
 from .xml import Element
 
 # ASCII only: Python's float() and int() would also take digits of other scripts.
@@ -29,6 +30,8 @@ class Prop:
     tag: str
     value: object
     element: Element
+    # a transform's matrix for normals as Mitsuba 3 composes it (see parse_transform)
+    normal_matrix: object = None
 
 
 __all__ = ["FLOAT32_MAX", "Prop", "parse_property"]
@@ -102,13 +105,122 @@ def _colour(el: Element, name: str) -> np.ndarray:
     return np.array(values * 3 if len(values) == 1 else values, dtype=np.float64)
 
 
-def _spectrum(el: Element, name: str) -> np.ndarray:
+def _spectrum(el: Element, name: str) -> Spectrum:
+    """<spectrum name= value=/>: one value (uniform) or wavelength:value pairs; or filename= (a file of
+    'wavelength value' lines, '#' comments); or <spectrum type=...> with its own parameters."""
+    if "type" in el.attrs:
+        return _spectrum_plugin(el, name)
+    check_leaf(el)
+    check_attrs(el, ("name",), ("value", "filename"))
+    if ("value" in el.attrs) == ("filename" in el.attrs):
+        raise el.error(f"'{name}': a <spectrum> needs either value= or filename= (not both)")
+    if "filename" in el.attrs:
+        return _spectrum_file(el, name)
     text = el.attrs["value"]
     tokens = [t for t in _SEPARATORS.split(text.strip()) if t]
-    if len(tokens) != 1 or ":" in text:
-        raise el.error(f"'{name}': only a single constant spectrum value is supported "
-                       f"(use <rgb> for colour), got {text!r}")
-    return np.full(3, parse_float(tokens[0], el, f"'{name}'"))
+    if len(tokens) == 1 and ":" not in tokens[0]:
+        return Spectrum(values=(parse_float(tokens[0], el, f"'{name}'"),))
+    pairs = []
+    for token in tokens:
+        parts = token.split(":")
+        if len(parts) != 2:
+            raise el.error(f"'{name}': {token!r} is not a wavelength:value pair (a spectrum is one "
+                           f"value or pairs such as \"400:0.1, 500:0.3\")")
+        pairs.append((parse_float(parts[0], el, f"'{name}' wavelength"),
+                      parse_float(parts[1], el, f"'{name}' value")))
+    return _tabulated(el, name, [w for w, _ in pairs], [v for _, v in pairs])
+
+
+def _tabulated(el: Element, name: str, wavelengths, values) -> Spectrum:
+    if len(wavelengths) < 2:
+        raise el.error(f"'{name}': a tabulated spectrum needs at least two wavelength:value pairs")
+    if len(wavelengths) != len(values):
+        raise el.error(f"'{name}': {len(wavelengths)} wavelengths but {len(values)} values")
+    if any(b <= a for a, b in zip(wavelengths, wavelengths[1:])):
+        raise el.error(f"'{name}': wavelengths must increase, got {list(wavelengths)}")
+    return Spectrum(values=tuple(values), wavelengths=tuple(wavelengths))
+
+
+def _spectrum_file(el: Element, name: str) -> Spectrum:
+    import os
+    path = el.extra.get("path") or os.path.join(os.path.dirname(os.path.abspath(el.file)),
+                                                el.attrs["filename"])
+    try:
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            lines = fh.read().splitlines()
+    except OSError as exc:
+        raise el.error(f"'{name}': cannot read spectrum file {el.attrs['filename']!r}: "
+                       f"{exc.strerror or exc}") from None
+    wavelengths, values = [], []
+    for number, line in enumerate(lines, 1):
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        tokens = _SEPARATORS.split(line.strip())
+        if len(tokens) < 2 or not (_FLOAT.match(tokens[0]) and _FLOAT.match(tokens[1])):
+            raise el.error(f"'{name}': line {number} of spectrum file {path} is not 'wavelength "
+                           f"value': {line.strip()[:60]!r}")
+        wavelengths.append(parse_float(tokens[0], el, f"'{name}' (file line {number})"))
+        values.append(parse_float(tokens[1], el, f"'{name}' (file line {number})"))
+    return _tabulated(el, f"{name}' (file {path})'", wavelengths, values)
+
+
+_SPECTRUM_TYPES = ("blackbody", "irregular", "regular", "uniform")
+
+
+def _spectrum_plugin(el: Element, name: str) -> Spectrum:
+    kind = el.attrs["type"]
+    check_attrs(el, ("type", "name"), ("id",))
+    if kind not in _SPECTRUM_TYPES:
+        raise el.error(f"unknown spectrum type {kind!r}; supported: " + ", ".join(_SPECTRUM_TYPES)
+                       + " (or <spectrum value=...>, or <rgb>)")
+    params = {}
+    for child in el.children:
+        if child.tag not in ("float", "integer", "string"):
+            raise child.error(f"<{child.tag}> is not allowed inside <spectrum type=\"{kind}\">")
+        check_leaf(child)
+        check_attrs(child, ("name", "value"))
+        if child.attrs["name"] in params:
+            raise child.error(f"parameter '{child.attrs['name']}' given twice")
+        params[child.attrs["name"]] = child
+    allowed = {"blackbody": {"temperature", "wavelength_min", "wavelength_max"},
+               "regular": {"values", "wavelength_min", "wavelength_max"},
+               "irregular": {"values", "wavelengths"}, "uniform": {"value"}}[kind]
+    for pname, child in params.items():
+        if pname not in allowed:
+            raise child.error(f"unknown parameter '{pname}' for <spectrum type=\"{kind}\">; supported: "
+                              + ", ".join(sorted(allowed)))
+
+    def number(pname, default=None):
+        child = params.get(pname)
+        if child is None:
+            if default is None:
+                raise el.error(f"<spectrum type=\"{kind}\"> needs '{pname}'")
+            return default
+        return parse_float(child.attrs["value"], child, f"'{pname}'")
+
+    def numbers(pname):
+        child = params.get(pname)
+        if child is None:
+            raise el.error(f"<spectrum type=\"{kind}\"> needs '{pname}'")
+        return [parse_float(t, child, f"'{pname}'") for t in _SEPARATORS.split(child.attrs["value"].strip()) if t]
+
+    if kind == "uniform":
+        return Spectrum(values=(number("value"),))
+    if kind == "blackbody":
+        temperature = number("temperature")
+        if not temperature > 0:
+            raise params["temperature"].error(f"'temperature' must be > 0 kelvin, got {temperature}")
+        return Spectrum(temperature=temperature,
+                        wavelength_range=(number("wavelength_min", 360.0), number("wavelength_max", 830.0)))
+    values = numbers("values")
+    if kind == "regular":
+        lo, hi = number("wavelength_min", 360.0), number("wavelength_max", 830.0)
+        if len(values) < 2:
+            raise el.error("a regular spectrum needs at least two values")
+        wavelengths = [lo + (hi - lo) * i / (len(values) - 1) for i in range(len(values))]
+    else:
+        wavelengths = numbers("wavelengths")
+    return _tabulated(el, name, wavelengths, values)
 
 
 _SCALAR_PARSERS = {
@@ -124,10 +236,16 @@ _SCALAR_PARSERS = {
 PROPERTY_TAGS = frozenset(_SCALAR_PARSERS) | {"point", "vector", "transform"}
 
 
-def parse_property(el: Element) -> Prop:
-    """Parse a property element whose tag is in PROPERTY_TAGS."""
-    if el.tag != "transform":
+def parse_property(el: Element, rotate_axis_as_given: bool = False) -> Prop:
+    """Parse a property element whose tag is in PROPERTY_TAGS. `rotate_axis_as_given`: Mitsuba's
+    rotate, which does not normalize its axis (Nori's does)."""
+    if el.tag not in ("transform", "spectrum"):
         check_leaf(el)
+    if el.tag == "spectrum":
+        if "name" not in el.attrs:
+            raise el.error("missing attribute 'name'")
+        name = el.attrs["name"]
+        return Prop(name, el.tag, _spectrum(el, name), el)
     if el.tag in _SCALAR_PARSERS:
         check_attrs(el, ("name", "value"))
         name = el.attrs["name"]
@@ -138,22 +256,44 @@ def parse_property(el: Element) -> Prop:
         return Prop(name, el.tag, xyz(el, f"'{name}'", 0.0), el)
     assert el.tag == "transform", el.tag
     check_attrs(el, ("name",))
-    return Prop(el.attrs["name"], el.tag, parse_transform(el), el)
+    matrix, normal_matrix = parse_transform(el, rotate_axis_as_given, with_normal_matrix=True)
+    return Prop(el.attrs["name"], el.tag, matrix, el, normal_matrix)
 
 
-def parse_transform(el: Element) -> np.ndarray:
+def parse_transform(el: Element, rotate_axis_as_given: bool = False, with_normal_matrix: bool = False):
+    """The 4x4 matrix of a <transform>, its ops applied in document order.
+
+    with_normal_matrix: also the matrix that takes normals to the world, as Mitsuba 3 composes it.
+    Mitsuba keeps each op's inverse transpose beside its matrix and multiplies both, taking a
+    rotation's inverse transpose to be the rotation itself (src/core/transform.h). With the
+    rotate axis used as given, a rotate whose axis is not of unit length is no rotation, and its
+    normals then turn with the rotate matrix, not with its inverse transpose; elsewhere the two
+    agree with the exact inverse transpose of the whole matrix."""
     m = np.eye(4)
+    normal_m = np.eye(3)
+    skewed = False
     for op in el.children:
         reader = _TRANSFORM_OPS.get(op.tag)
         if reader is None:
             raise op.error(f"unknown transform operation <{op.tag}>; supported: "
                            + ", ".join(sorted(_TRANSFORM_OPS)))
         check_leaf(op)
-        m = reader(op) @ m
+        step = (_rotate(op, normalize_axis=False) if op.tag == "rotate" and rotate_axis_as_given
+                else reader(op))
+        m = step @ m
+        if op.tag == "rotate" and rotate_axis_as_given:
+            normal_step = step[:3, :3]
+            skewed |= not np.allclose(step[:3, :3] @ step[:3, :3].T, np.eye(3), atol=1e-9)
+        else:
+            normal_step = np.linalg.inv(step[:3, :3]).T if np.linalg.det(step[:3, :3]) != 0 else np.eye(3)
+        normal_m = normal_step @ normal_m
     try:
-        return invertible(el.attrs["name"], m)
+        invertible(el.attrs["name"], m)
     except CheckError as exc:
         raise el.error(str(exc)) from None
+    if with_normal_matrix:
+        return m, (normal_m if skewed else None)
+    return m
 
 
 def _translate(op: Element) -> np.ndarray:
@@ -166,12 +306,12 @@ def _scale(op: Element) -> np.ndarray:
     return tf.scale(xyz(op, "scale", 1.0))
 
 
-def _rotate(op: Element) -> np.ndarray:
+def _rotate(op: Element, normalize_axis: bool = True) -> np.ndarray:
     check_attrs(op, ("angle",), ("value", "x", "y", "z"))
     axis = xyz(op, "rotate axis", 0.0)
     if not np.any(axis):
         raise op.error("rotate: the axis is zero; give it as value=\"x, y, z\" or x=/y=/z=")
-    return tf.rotate(axis, parse_float(op.attrs["angle"], op, "rotate angle"))
+    return tf.rotate(axis, parse_float(op.attrs["angle"], op, "rotate angle"), normalize_axis)
 
 
 def _matrix(op: Element) -> np.ndarray:

@@ -31,9 +31,11 @@ def normalize(v) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
-def rotate(axis, angle_degrees: float) -> np.ndarray:
-    """Right-handed rotation about `axis` (need not be unit length, must not be zero)."""
-    k = normalize(axis)
+def rotate(axis, angle_degrees: float, normalize_axis: bool = True) -> np.ndarray:
+    """Right-handed rotation about `axis` (not zero) by Rodrigues' formula,
+    cos I + sin [a]x + (1 - cos) a a^T. With normalize_axis=False the axis is used as given, as
+    Mitsuba 3 does (Dr.Jit's rotate): an axis that is not of unit length then also scales and shears."""
+    k = normalize(axis) if normalize_axis else np.asarray(axis, dtype=np.float64)
     theta = np.radians(angle_degrees)
     cross = np.array([[0.0, -k[2], k[1]],
                       [k[2], 0.0, -k[0]],

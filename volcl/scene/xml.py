@@ -26,6 +26,7 @@ class Element:
     file: str
     line: int
     children: list = field(default_factory=list)
+    extra: dict = field(default_factory=dict)     # what reading the file added (a resolved filename)
 
     def error(self, message: str, element: str | None = None) -> VolclError:
         return VolclError(message, file=self.file, line=self.line, element=element or self.label())
