@@ -16,7 +16,7 @@
     || !defined(VOLCL_HAS_MEDIUM_BOUNDARIES) || !defined(VOLCL_HAS_CHROMATIC_MEDIA) || !defined(VOLCL_HAS_HG) \
     || !defined(VOLCL_HAS_EMISSIVE_MEDIA) || !defined(VOLCL_HAS_GRID_MEDIA) || !defined(VOLCL_HAS_EQUIANGULAR) \
     || !defined(VOLCL_HAS_CYLINDERS) || !defined(VOLCL_HAS_THINLENS) || !defined(VOLCL_HAS_ORTHOGRAPHIC) \
-    || !defined(VOLCL_HAS_DIRECT)
+    || !defined(VOLCL_HAS_DIRECT) || !defined(VOLCL_HAS_PHASE_FAMILIES)
 #error "volcl: every VOLCL_HAS_* feature flag must be defined to 0 or 1 by the host"
 #endif
 

@@ -237,7 +237,7 @@ inline float3 equiangular_direct(const SceneData *sc, Rng *rng, const Equiangula
     if (max_component(tr_shadow) <= 0.0f) return (float3)(0.0f);
     float3 sigma_t = vload_f3(m->sigma_t);
     float3 sigma_s = sigma_t * vload_f3(m->albedo);
-    float ph = phase_eval(m, es->d, wi);
+    float ph = phase_eval(sc, m, es->d, wi);
     return transmittance_exp(sigma_t, t) * sigma_s * tr_shadow * vload_f3(l->value)
            * (ph * w * (float)count / (pdf_e * d2));
 }
@@ -305,8 +305,10 @@ inline int path_medium_event(const SceneData *sc, Rng *rng, PathState *ps, bool 
         float u_pick = rng_next_float(rng);
         float2 ul = rng_next_float2(rng);
         if (light_sample(sc, p, u_pick, ul, &ls) && max_component(ls.value) > 0.0f) {
-            float ph = phase_eval(m, ps->d, ls.wi);
-            float3 c = nee_contribution(sc, &ls, (float3)(ph), ph, p, ps->medium, rng, cutoffs);
+            /* the phase value in the estimate, the phase sampler's pdf in the MIS weight */
+            float ph_pdf;
+            float ph = phase_eval_pdf(sc, m, ps->d, ls.wi, &ph_pdf);
+            float3 c = nee_contribution(sc, &ls, (float3)(ph), ph_pdf, p, ps->medium, rng, cutoffs);
 #if VOLCL_HAS_EQUIANGULAR
             c *= equiangular_distance_weight(sc, &es, m, &ls, ms.t);
 #endif
@@ -314,7 +316,9 @@ inline int path_medium_event(const SceneData *sc, Rng *rng, PathState *ps, bool 
         }
     }
     float3 nd;
-    ps->prev_pdf = phase_sample(m, ps->d, rng_next_float2(rng), &nd);
+    float ph_weight;    /* value / pdf: 1 for every phase sampled exactly */
+    ps->prev_pdf = phase_sample(sc, m, ps->d, rng_next_float2(rng), rng, &nd, &ph_weight);
+    ps->beta *= ph_weight;
     ps->specular = false;
     ps->prev_p = p;
     ps->o = p;

@@ -36,7 +36,8 @@ __kernel void render_pass(__global const BvhWideNode *nodes, __global const Leaf
                           __global const float *light_tri_cdf, __global const int *light_tris,
                           __global const Medium *media, __global const GridVolume *grids,
                           __global const float *grid_data, __global const RenderParams *params,
-                          __global const float *filter_table,
+                          __global const float *filter_table, __global const PhaseLobe *phase_lobes,
+                          __global const float *phase_tables,
                           __global float4 *sums, __global float4 *sums_sq, __global uint *invalid,
                           __global uint *cutoffs,
                           uint sample_base, int tile_x, int tile_y, int tile_w, int tile_pixels,
@@ -48,7 +49,7 @@ __kernel void render_pass(__global const BvhWideNode *nodes, __global const Leaf
     int px = tile_x + tp % tile_w, py = tile_y + tp / tile_w;
     int pixel = py * params->width + px;
     SceneData sc = {nodes, leaves, triangles, normals, spheres, cylinders, shapes, bsdfs, lights,
-                    light_tri_cdf, light_tris, media, grids, grid_data, params};
+                    light_tri_cdf, light_tris, media, grids, grid_data, params, phase_lobes, phase_tables};
     Rng rng = rng_init(params->seed, (uint)pixel, sample_base + (uint)slot);
     float3 o, d;
     float t_max;

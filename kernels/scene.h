@@ -18,6 +18,8 @@ typedef struct {
     __global const GridVolume *grids;   /* grid descriptors of heterogeneous media */
     __global const float *grid_data;    /* every grid's voxels and majorant cells, concatenated */
     __global const RenderParams *params;
+    __global const PhaseLobe *phase_lobes;  /* lobes of the mixture phase functions (PHASE_LOBES) */
+    __global const float *phase_tables;     /* their piecewise-linear tables, concatenated */
 } SceneData;
 
 #endif

@@ -118,7 +118,8 @@ typedef struct {
 #define MEDIUM_HETEROGENEOUS 1
 
 #define PHASE_ISOTROPIC 0
-#define PHASE_HG 1
+#define PHASE_HG 1          /* g in the Medium record */
+#define PHASE_LOBES 2       /* a mixture of PhaseLobe records (VOLCL_HAS_PHASE_FAMILIES) */
 
 /* Homogeneous media use sigma_t, albedo and emission. Heterogeneous media read extinction and albedo
  * from the GridVolumes sigma_t_grid and albedo_grid, and `emission` holds the radiance Le: the
@@ -131,10 +132,27 @@ typedef struct {
     float sigma_t[3];   /* extinction, scale already applied */
     int albedo_grid;    /* heterogeneous: index into the grid descriptors, else -1 */
     float albedo[3];
-    float pad2;
+    int phase_lobe;     /* PHASE_LOBES: the first of its lobes in phase_lobes */
     float emission[3];  /* homogeneous: sigma_a * radiance (per unit length); heterogeneous: radiance */
-    float pad3;
+    int phase_lobe_count;
 } Medium;
+
+#define LOBE_ISOTROPIC 0
+#define LOBE_HG 1               /* p[0] = g */
+#define LOBE_RAYLEIGH 2
+#define LOBE_DRAINE 3           /* p = (g, alpha, 1 / (1 + alpha (1 + 2 g^2) / 3)) */
+#define LOBE_TABULATED 4        /* table over cos */
+#define LOBE_FOURNIER_FORAND 5  /* p = (a, q, c3 / 16 pi, q^-a) (volcl/phase.py), table over x = sin^2(theta/2)^a */
+
+/* One lobe of a mixture phase function. A table is a piecewise-linear density on table_size knots
+ * at phase_tables[table]: the knots, then the density at each knot, then the CDF at each knot. */
+typedef struct {
+    int type;
+    float weight;       /* the lobe's probability in the mixture (the weights of a medium sum to 1) */
+    int table;          /* offset into phase_tables, or -1 */
+    int table_size;
+    float p[4];
+} PhaseLobe;
 
 #define GRID_TRILINEAR 0
 #define GRID_NEAREST 1

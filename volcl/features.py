@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .phase import device_kind
 from .scene.model import Scene, Volume
 
 FLAGS = (
@@ -26,6 +27,8 @@ FLAGS = (
     "THINLENS",             # a thin-lens camera (depth of field)
     "ORTHOGRAPHIC",         # an orthographic camera
     "DIRECT",               # Mitsuba's direct integrator instead of the volumetric path tracer
+    "PHASE_FAMILIES",       # phase functions beyond HG: Rayleigh, Draine, Cornette-Shanks, Fournier-Forand,
+                            # tabulated, blends, approximate Mie (one flag: volcl/phase.py, README)
 )
 
 
@@ -67,7 +70,9 @@ def detect(scene: Scene) -> dict[str, bool]:
     f["MEDIA"] = bool(media)
     f["MEDIUM_BOUNDARIES"] = any(s.interior is not None or s.exterior is not None for s in scene.shapes)
     f["CHROMATIC_MEDIA"] = any(_chromatic(m.sigma_t) for m in media)
-    f["HG"] = any(m.phase.kind == "hg" for m in media)
+    phase_kinds = {device_kind(m.phase) for m in media}
+    f["HG"] = "hg" in phase_kinds
+    f["PHASE_FAMILIES"] = "lobes" in phase_kinds
     f["EMISSIVE_MEDIA"] = any(m.radiance is not None and np.any(np.asarray(m.radiance) > 0) for m in media)
     f["GRID_MEDIA"] = any(m.kind == "heterogeneous" for m in media)
     # the estimator's default ('auto'): worth compiling where a point light sits inside a medium

@@ -78,14 +78,24 @@ LIGHT = np.dtype([
 ])
 
 MEDIUM_TYPES = {"homogeneous": 0, "heterogeneous": 1}
-PHASE_TYPES = {"isotropic": 0, "hg": 1}
+# Medium.phase: isotropic and HG in the medium record itself, anything else a mixture of lobes
+PHASE_TYPES = {"isotropic": 0, "hg": 1, "lobes": 2}
 # Heterogeneous media name their grids (sigma_t_grid, albedo_grid), and `emission` holds the
 # radiance; homogeneous media use sigma_t, albedo, and emission = sigma_a * radiance.
+# A mixture phase is PHASE_LOBE records [phase_lobe, phase_lobe + phase_lobe_count).
 MEDIUM = np.dtype([
     ("type", np.int32), ("phase", np.int32), ("g", np.float32), ("sigma_t_grid", np.int32),
     ("sigma_t", *f3), ("albedo_grid", np.int32),
-    ("albedo", *f3), ("pad2", np.float32),
-    ("emission", *f3), ("pad3", np.float32),
+    ("albedo", *f3), ("phase_lobe", np.int32),
+    ("emission", *f3), ("phase_lobe_count", np.int32),
+])
+
+# One lobe of a mixture phase function (kernels/types.h says what `p` holds for each type); a
+# table is a piecewise-linear density at phase_tables[table ...]: knots, densities, CDF.
+LOBE_TYPES = {"isotropic": 0, "hg": 1, "rayleigh": 2, "draine": 3, "tabulated": 4, "fournier_forand": 5}
+PHASE_LOBE = np.dtype([
+    ("type", np.int32), ("weight", np.float32), ("table", np.int32), ("table_size", np.int32),
+    ("p", np.float32, 4),
 ])
 
 GRID_FILTERS = {"trilinear": 0, "nearest": 1}
@@ -118,5 +128,5 @@ SHARED_STRUCTS = {
     "BvhWideNode": BVH_WIDE_NODE, "LeafPacket": LEAF_PACKET, "Triangle": TRIANGLE, "TriangleNormals": TRIANGLE_NORMALS, "Sphere": SPHERE,
     "Cylinder": CYLINDER,
     "ShapeInfo": SHAPE_INFO, "Bsdf": BSDF, "Light": LIGHT, "Medium": MEDIUM, "GridVolume": GRID_VOLUME,
-    "RenderParams": RENDER_PARAMS,
+    "RenderParams": RENDER_PARAMS, "PhaseLobe": PHASE_LOBE,
 }

@@ -12,7 +12,8 @@ arrays in parts, so that an edited value (volcl.params) repacks only the part it
     lights     light records, area-light triangle CDFs              emitter values, geometry
     shapes     per-shape bsdf, light and media indices              structure only
     bsdfs      bsdf records                                         bsdf colours and IORs
-    media      media records, grid descriptors and values           media coefficients, phase
+    media      media records, grid descriptors and values,          media coefficients, phase
+               phase lobes and their tables
     camera     the reconstruction filter's table                    the film's filter
 and the RenderParams record, which is small and repacked with every part.
 """
@@ -29,6 +30,7 @@ from .bvh_wide import device_bvh, empty_wide
 from .features import detect
 from .grids import GridPacker
 from .mesh import triangle_areas32
+from .phase import PhasePacker
 from .scene.model import Camera, Filter, Scene
 from .scene.shapes import cylinder_bounds
 
@@ -40,12 +42,13 @@ PARTS = {
     "lights": ("lights", "light_tri_cdf", "light_tris"),
     "shapes": ("shapes",),
     "bsdfs": ("bsdfs",),
-    "media": ("media", "grids", "grid_data"),
+    "media": ("media", "grids", "grid_data", "phase_lobes", "phase_tables"),
     "camera": ("filter_table",),
 }
 # the kernel's buffer arguments, in order (kernels/render.cl)
 ARG_ORDER = ("nodes", "leaves", "triangles", "normals", "spheres", "cylinders", "shapes", "bsdfs", "lights",
-             "light_tri_cdf", "light_tris", "media", "grids", "grid_data", "params", "filter_table")
+             "light_tri_cdf", "light_tris", "media", "grids", "grid_data", "params", "filter_table",
+             "phase_lobes", "phase_tables")
 
 
 @dataclass
@@ -85,14 +88,13 @@ def _pack_bsdfs(bsdfs):
     return arr
 
 
-def _pack_media(media, grids: GridPacker):
+def _pack_media(media, grids: GridPacker, phases: PhasePacker):
     arr = np.zeros(max(len(media), 1), layout.MEDIUM)
     arr["sigma_t_grid"] = arr["albedo_grid"] = -1
     for i, m in enumerate(media):
         r = arr[i]
         r["type"] = layout.MEDIUM_TYPES[m.kind]
-        r["phase"] = layout.PHASE_TYPES[m.phase.kind]
-        r["g"] = m.phase.g if m.phase.kind == "hg" else 0.0
+        r["phase"], r["g"], r["phase_lobe"], r["phase_lobe_count"] = phases.add(m.phase)
         if m.kind == "heterogeneous":
             # the scale goes into the grid values (and so into the majorants) once, here
             r["sigma_t_grid"] = grids.add(m.sigma_t, m.scale, tracked=True)
@@ -366,10 +368,14 @@ class Packer:
 
     def _pack_media(self):
         grids = GridPacker(self.majorant_cells)
-        media = _pack_media(self.media, grids)
+        phases = PhasePacker()
+        media = _pack_media(self.media, grids, phases)
         grid_desc, grid_data = grids.arrays()
-        self.stats.update(grid_voxels=grids.voxels, majorant_cells=grids.majorant_count)
-        self.arrays.update(media=media, grids=grid_desc, grid_data=grid_data)
+        phase_lobes, phase_tables = phases.arrays()
+        self.stats.update(grid_voxels=grids.voxels, majorant_cells=grids.majorant_count,
+                          phase_table_ratio_error=max(phases.ratio_errors, default=0.0))
+        self.arrays.update(media=media, grids=grid_desc, grid_data=grid_data, phase_lobes=phase_lobes,
+                           phase_tables=phase_tables)
 
     def _pack_camera(self):
         self.arrays["filter_table"] = filter_table(self.scene.camera.rfilter)

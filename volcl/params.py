@@ -244,7 +244,10 @@ def _medium_params(scene: ModelScene, m: Medium, prefix: str):
             m.phase = Phase()
         else:
             m.phase = Phase("hg", g)
-    yield param("phase_function.g", "g", "float", lambda: float(m.phase.g if m.phase.kind == "hg" else 0.0), put_g)
+    # only isotropic and HG media have this g: setting it would replace any other phase function with HG
+    if m.phase.kind in ("isotropic", "hg"):
+        yield param("phase_function.g", "g", "float", lambda: float(m.phase.g if m.phase.kind == "hg" else 0.0),
+                    put_g)
 
     def put_radiance(a):
         checks.nonneg_color("volcl_radiance", a)

@@ -45,6 +45,11 @@ _DEFAULT = object()
 # Samples per pixel before a target error is trusted: with fewer, a pixel whose rare bright paths
 # have not turned up yet reports a small variance along with its small mean (README, "Accuracy").
 MIN_SPP_FOR_ERROR = 16
+# Work-group size of every launch (where the device and kernel allow it), the global size rounded up
+# to a multiple of it (the kernel ignores the items past the end): drivers that compile a kernel
+# per work-group size (PoCL does, and picks a size from the global size when given none) then
+# compile once, however many sizes of tiles and launches a render has.
+GROUP_ITEMS = 64
 # bytes of accumulators per pixel and slot: sums and sums of squares (float4 each), invalid and
 # cut-off counts (uint each)
 ACCUMULATOR_BYTES = 40
@@ -97,6 +102,7 @@ class Renderer:
         ctx = self.device.ctx
         self.queue = self.device.queue
         self.kernel = cl.Kernel(self.program, "render_pass")
+        self.group_items = _group_items(self.kernel, self.device.device)
         mf = cl.mem_flags
         self.params_buffer = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=self.params.reshape(1))
         if launch_seconds is _DEFAULT:
@@ -165,7 +171,8 @@ class Renderer:
                                  np.int32(t.width), np.int32(self.npix), np.int32(first), np.int32(count),
                                  np.int32(slots))
             t0 = time.perf_counter()
-            event = cl.enqueue_nd_range_kernel(self.queue, self.kernel, (count * slots,), None)
+            items = -(-count * slots // self.group_items) * self.group_items
+            event = cl.enqueue_nd_range_kernel(self.queue, self.kernel, (items,), (self.group_items,))
             self.launches += 1
             if self.adaptive:
                 event.wait()
@@ -316,6 +323,16 @@ class Renderer:
                    "bvh_seconds": packed.bvh_seconds, "features": describe(self.features), **packed.stats},
             seed=self.seed, tile=None if whole else self.tile, image_size=(self.width, self.height), info=info,
             second_moment=second_moment)
+
+
+def _group_items(kernel, device) -> int:
+    """GROUP_ITEMS, or the largest power of two below it that the kernel runs with on `device`."""
+    limit = min(int(device.max_work_group_size),
+                int(kernel.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, device)))
+    n = GROUP_ITEMS
+    while n > limit:
+        n //= 2
+    return max(n, 1)
 
 
 class _ErrorCheck:

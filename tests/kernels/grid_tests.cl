@@ -21,9 +21,10 @@
     __global const Cylinder *cylinders, __global const ShapeInfo *shapes, __global const Bsdf *bsdfs, __global const Light *lights,         \
     __global const float *light_tri_cdf, __global const int *light_tris, __global const Medium *media,  \
     __global const GridVolume *grids, __global const float *grid_data,                                  \
-    __global const RenderParams *params, __global const float *filter_table
+    __global const RenderParams *params, __global const float *filter_table,                            \
+    __global const PhaseLobe *phase_lobes, __global const float *phase_tables
 #define SCENE_INIT {nodes, leaves, triangles, normals, spheres, cylinders, shapes, bsdfs, lights, light_tri_cdf, \
-                    light_tris, media, grids, grid_data, params}
+                    light_tris, media, grids, grid_data, params, phase_lobes, phase_tables}
 
 /* grid_lookup of descriptor `grid` at local points (3 floats each). */
 __kernel void lookups(__global const GridVolume *grids, __global const float *grid_data,

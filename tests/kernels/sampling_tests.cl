@@ -94,24 +94,46 @@ __kernel void medium_tr(__global const Medium *m, __global const float *t, __glo
 
 /* ---- phase.h ---- */
 
-/* d_out around the travel direction d_in (3 floats), the returned pdf, and phase_eval of the
- * sampled direction. */
-__kernel void phase_sample_dirs(__global const Medium *m, __global const float *d_in, __global float *d_out,
-                                __global float *pdf, __global float *eval, uint seed) {
+/* The phase functions read the medium, its lobes and their tables through the scene bundle. */
+#define PHASE_SCENE SceneData sc; sc.media = m; sc.phase_lobes = lobes; sc.phase_tables = tables
+
+/* d_out around the travel direction d_in (3 floats), the returned pdf and weight, and phase_eval_pdf
+ * of the sampled direction (value and pdf). */
+__kernel void phase_sample_dirs(__global const Medium *m, __global const PhaseLobe *lobes,
+                                __global const float *tables, __global const float *d_in, __global float *d_out,
+                                __global float *pdf, __global float *eval, __global float *eval_pdf,
+                                __global float *weight, uint seed) {
     int i = get_global_id(0);
+    PHASE_SCENE;
     Rng r = rng_init(seed, i, 0);
     float3 din = vload3(0, d_in), d;
-    pdf[i] = phase_sample(m, din, rng_next_float2(&r), &d);
+    float w, ep;
+    pdf[i] = phase_sample(&sc, m, din, rng_next_float2(&r), &r, &d, &w);
     vstore3(d, i, d_out);
-    eval[i] = phase_eval(m, din, d);
+    weight[i] = w;
+    eval[i] = phase_eval_pdf(&sc, m, din, d, &ep);
+    eval_pdf[i] = ep;
+}
+
+/* phase_eval_pdf from d_in (3 floats) towards each d_out[i]. */
+__kernel void phase_eval_dirs(__global const Medium *m, __global const PhaseLobe *lobes,
+                              __global const float *tables, __global const float *d_in,
+                              __global const float *d_out, __global float *value, __global float *pdf) {
+    int i = get_global_id(0);
+    PHASE_SCENE;
+    float p;
+    value[i] = phase_eval_pdf(&sc, m, vload3(0, d_in), vload3(i, d_out), &p);
+    pdf[i] = p;
 }
 
 /* phase_eval between +z and the direction at cos_theta[i] from it. */
-__kernel void phase_eval_cos(__global const Medium *m, __global const float *cos_theta, __global float *value) {
+__kernel void phase_eval_cos(__global const Medium *m, __global const PhaseLobe *lobes,
+                             __global const float *tables, __global const float *cos_theta, __global float *value) {
     int i = get_global_id(0);
+    PHASE_SCENE;
     float c = cos_theta[i];
     float3 d_out = (float3)(sqrt(fmax(0.0f, 1.0f - c * c)), 0.0f, c);
-    value[i] = phase_eval(m, (float3)(0.0f, 0.0f, 1.0f), d_out);
+    value[i] = phase_eval(&sc, m, (float3)(0.0f, 0.0f, 1.0f), d_out);
 }
 
 /* HG at distance w[i] from its peak. */
@@ -125,6 +147,24 @@ __kernel void hg_sample_cos(__global float *c, uint seed, float g) {
     Rng r = rng_init(seed, i, 0);
     float w = phase_hg_sample_w(fabs(g), rng_next_float(&r));
     c[i] = g >= 0.0f ? 1.0f - w : w - 1.0f;
+}
+
+/* The Fournier-Forand lobe's value and table pdf at s[i] = sin^2(theta / 2) (at the floor, where
+ * the lobe counts value = pdf, both are the pdf). */
+__kernel void phase_ff_at_s(__global const PhaseLobe *lobes, __global const float *tables,
+                            __global const float *s, __global float *value, __global float *pdf) {
+    int i = get_global_id(0);
+    SceneData sc;
+    sc.phase_tables = tables;
+    float p;
+    value[i] = phase_ff_eval_pdf(&sc, &lobes[0], s[i], &p);
+    pdf[i] = p;
+}
+
+/* Rayleigh cosines from u[i]. */
+__kernel void phase_rayleigh_cos(__global const float *u, __global float *c) {
+    int i = get_global_id(0);
+    c[i] = phase_rayleigh_sample_cos(u[i]);
 }
 
 /* ---- bsdf.h ---- */

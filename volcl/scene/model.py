@@ -29,8 +29,18 @@ class Source:
 
 @dataclass
 class Phase:
-    kind: str = "isotropic"          # 'isotropic' | 'hg'
-    g: float = 0.0
+    """A phase function; volcl/phase.py says what each kind means and how the kernels get it."""
+    kind: str = "isotropic"          # 'isotropic' | 'hg' | 'rayleigh' | 'blend' | 'tabulated' | 'draine'
+                                     # | 'cornette_shanks' | 'fournier_forand' | 'mie'
+    g: float = 0.0                   # hg, draine, cornette_shanks
+    alpha: float = 0.0               # draine
+    weight: float = 0.5              # blend: (1 - weight) * phases[0] + weight * phases[1]
+    phases: tuple = ()               # blend: the two phases blended
+    values: Optional[np.ndarray] = None  # tabulated: values at cosines evenly spaced over [-1, 1], 1 forward
+    n: float = 0.0                   # fournier_forand: relative refractive index of the particles
+    mu: float = 0.0                  # fournier_forand: slope of the Junge size distribution
+    diameter: float = 0.0            # mie: droplet diameter in micrometres
+    tolerance: float = 1e-3          # fournier_forand: bound on |value / pdf - 1| of its sampling table
 
 
 @dataclass

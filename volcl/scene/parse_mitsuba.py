@@ -18,6 +18,7 @@ from .model import (Bsdf, Camera, Emitter, Integrator, Medium, Phase, Scene, Sen
                     select_sensor)
 from .objects import AreaLight
 from .parse_common import Dialect, Node, Spec, medium_list
+from .phases import SPECS as PHASE_SPECS, build_phase
 from .properties import PROPERTY_TAGS
 from .shapes import bounds
 
@@ -76,7 +77,7 @@ SPECS = {
                                     "accel": "volcl uses its own lookups (same values)"}),
         "constvolume": Spec({"value": "color", **_TO_WORLD}),
     },
-    "phase": {"isotropic": Spec(), "hg": Spec({"g": "float"})},
+    "phase": PHASE_SPECS,
 }
 
 
@@ -408,10 +409,6 @@ def build_volume(node: Node) -> Volume:
     return Volume("grid", value=rgb(0.0), data=data, to_world=to_world,
                   filter=node.choice("filter_type", ("trilinear", "nearest"), "trilinear"),
                   filename=path)
-
-
-def build_phase(node: Node) -> Phase:
-    return objects.phase_hg(node, "g", 0.8) if node.type == "hg" else Phase()
 
 
 DIALECT = Dialect(
