@@ -20,6 +20,19 @@
 #error "volcl: every VOLCL_HAS_* feature flag must be defined to 0 or 1 by the host"
 #endif
 
+/* Every kernel entry point is declared VOLCL_KERNEL. Hazard: Intel's CPU OpenCL runtime (2026.2)
+ * miscompiles float3 values passed to or returned from a function it does not inline once its
+ * implicit vectorizer has run on the kernel, even when it then keeps the scalar kernel: each work
+ * item reads another's lanes (tests/test_implementations.py has the six-line reproducer). In the
+ * megakernel that turned a shadow ray's transmittance into another pixel's, run to run. The vector
+ * type hint makes that vectorizer leave the kernel alone (it rejected the divergent megakernel
+ * anyway); the hint is honest, the kernels compute in float3, 4-wide registers, and other
+ * implementations take it as the hint it is. (Building with -DVOLCL_KERNEL=__kernel brings the
+ * failure back: tests/test_implementations.py checks that the self-test then rejects the device.) */
+#ifndef VOLCL_KERNEL
+#define VOLCL_KERNEL __kernel __attribute__((vec_type_hint(float4)))
+#endif
+
 inline float3 vload_f3(const __global float *p) { return (float3)(p[0], p[1], p[2]); }
 
 inline float max_component(float3 v) { return fmax(v.x, fmax(v.y, v.z)); }

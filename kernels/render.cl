@@ -28,7 +28,7 @@
 #include "integrator.h"
 #include "direct.h"
 
-__kernel void render_pass(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
+VOLCL_KERNEL void render_pass(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
                           __global const Triangle *triangles, __global const TriangleNormals *normals,
                           __global const Sphere *spheres, __global const Cylinder *cylinders,
                           __global const ShapeInfo *shapes,
@@ -42,7 +42,7 @@ __kernel void render_pass(__global const BvhWideNode *nodes, __global const Leaf
                           __global uint *cutoffs,
                           uint sample_base, int tile_x, int tile_y, int tile_w, int tile_pixels,
                           int first, int count, int slots) {
-    int gid = get_global_id(0);
+    int gid = (int)get_global_id(0);     /* launches stay below 2^31 work items (renderer.py) */
     if (gid >= count * slots) return;
     int slot = gid / count;
     int tp = first + gid % count;    /* the pixel's index in the tile */

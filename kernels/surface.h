@@ -13,7 +13,13 @@ typedef struct {
     float mag;      /* magnitude of the coordinates p was computed from: scales offset_origin */
 } SurfacePoint;
 
+/* Hazard: forcing the inlining of a function that returns a struct makes LLVM 14 (at -O0 too) mark
+ * the returned copy with llvm.experimental.noalias.scope.decl, which Oclgrind 21.10 cannot run
+ * ("Undefined external function"); unoptimized builds (-cl-opt-disable, no __OPTIMIZE__) leave
+ * inlining to the compiler, optimized ones keep forcing it. */
+#ifdef __OPTIMIZE__
 __attribute__((always_inline))
+#endif
 inline SurfacePoint surface_point(const SceneData *sc, const Hit *h, float3 o, float3 d) {
     SurfacePoint s;
 #if VOLCL_HAS_CYLINDERS

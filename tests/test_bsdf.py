@@ -10,6 +10,8 @@ import stats
 from conftest import run_kernel
 from volcl import layout
 
+pytestmark = pytest.mark.every_implementation
+
 F32 = float(np.finfo(np.float32).eps)
 u32, f32 = np.uint32, np.float32
 GOLD_ETA = (0.143, 0.374, 1.442)    # gold-like complex IOR (eta + i k) at roughly R, G, B

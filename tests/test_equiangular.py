@@ -15,6 +15,8 @@ from volcl.phase import pdf as phase_pdf
 from volcl.renderer import render
 from volcl.scene.model import Emitter, rgb
 
+pytestmark = pytest.mark.every_implementation
+
 SPAN = 1000.0   # EQUIANGULAR_SPAN in kernels/equiangular.h
 
 # (what, origin, direction, light, t_max)

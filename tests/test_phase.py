@@ -12,6 +12,8 @@ import stats
 from conftest import run_kernel
 from volcl.scene.model import Phase
 
+pytestmark = pytest.mark.every_implementation
+
 N = 1_000_000
 F32 = float(np.finfo(np.float32).eps)
 u32, f32 = np.uint32, np.float32

@@ -19,6 +19,8 @@ from conftest import run_kernel
 from volcl import phase as ph
 from volcl.scene.model import Phase
 
+pytestmark = pytest.mark.every_implementation
+
 N = 1_000_000
 F32 = float(np.finfo(np.float32).eps)
 f32 = np.float32

@@ -129,7 +129,8 @@ def write(result: RenderResult, path) -> Path:
 
 def devices() -> list:
     """Every OpenCL device (volcl.Device objects; `volcl.device.kernels_build(d)` tells whether
-    volcl's kernels build on one). The same objects are handed out every time."""
+    volcl's kernels build on one, `volcl.device.check(d)` whether it also passes volcl's
+    self-test). The same objects are handed out every time."""
     return devmod.list_devices()
 
 

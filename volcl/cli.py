@@ -5,6 +5,7 @@ import argparse
 import math
 import sys
 import time
+import warnings
 from pathlib import Path
 
 from . import __version__
@@ -67,20 +68,28 @@ def cmd_render(args):
 
 
 def cmd_devices(args):
-    from .device import kernels_build, list_devices
+    from . import selftest
+    from .device import is_simulator, kernels_build, list_devices
     devs = list_devices()
     if not devs:
         from .device import INSTALL_HINT
         print(f"no OpenCL platform found; {INSTALL_HINT}")
         return 1
-    print(f"{'index':6} {'type':5} {'units':>5} {'memory':>9}  {'OpenCL C':12} {'kernels':8} name (vendor, platform)")
+    print(f"{'index':6} {'type':5} {'units':>5} {'memory':>9}  {'OpenCL C':12} {'kernels':8} {'self-test':10} "
+          "name (vendor, platform)")
     for d in devs:
         dev = d.device
         ok, why = kernels_build(d)
+        test = None
+        if ok and not is_simulator(d):
+            test = selftest.run(d)
         mem = f"{dev.global_mem_size / 2**30:.1f} GiB"
         status = "build" if ok else "FAIL"
+        tested = "-" if test is None else (f"ok {test.seconds:.1f} s" if test.ok else "FAIL")
+        note = f": {why}" if not ok else (": simulator, not self-tested" if test is None else
+                                          ("" if test.ok else f": {test.message}"))
         print(f"{d.key:6} {d.kind:5} {dev.max_compute_units:5} {mem:>9}  {dev.opencl_c_version.replace('OpenCL C ', ''):12} "
-              f"{status:8} {d.name} ({dev.vendor.strip()}, {d.platform_name})" + ("" if ok else f": {why}"))
+              f"{status:8} {tested:10} {d.name} ({dev.vendor.strip()}, {d.platform_name}){note}", flush=True)
     return 0
 
 
@@ -163,6 +172,21 @@ def cmd_converge(args):
     return 0
 
 
+def _show_skipped_devices():
+    """A device the default choice passes over (volcl.device.DeviceSkipped) is named on stderr as
+    `volcl: warning: ...`, every time, instead of in Python's warning format."""
+    from .device import DeviceSkipped
+    shown = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, DeviceSkipped):
+            print(f"volcl: warning: {message}", file=sys.stderr, flush=True)
+        else:
+            shown(message, category, filename, lineno, file, line)
+    warnings.showwarning = show
+    warnings.simplefilter("always", DeviceSkipped)
+
+
 def main(argv=None):
     from .estimator import CHOICES
     p = argparse.ArgumentParser(prog="volcl", description="volcl: a volumetric path tracer on OpenCL")
@@ -236,7 +260,8 @@ def main(argv=None):
     scene_opts(c)
     c.set_defaults(func=cmd_converge)
 
-    d = sub.add_parser("devices", help="list OpenCL devices and whether volcl's kernels build on them")
+    d = sub.add_parser("devices", help="list OpenCL devices, whether volcl's kernels build on them and "
+                                      "whether they pass its self-test")
     d.set_defaults(func=cmd_devices)
 
     i = sub.add_parser("info", help="what a scene contains and which kernel features it compiles")
@@ -255,7 +280,9 @@ def main(argv=None):
 
     args = p.parse_args(argv)
     try:
-        return args.func(args)
+        with warnings.catch_warnings():
+            _show_skipped_devices()
+            return args.func(args)
     except VolclError as exc:
         print(f"volcl: error: {exc}", file=sys.stderr)
         return 2

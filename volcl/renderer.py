@@ -142,8 +142,10 @@ class Renderer:
         return self.prepared.packed
 
     def reset(self):
+        # zeros written from the host rather than clEnqueueFillBuffer: Oclgrind 21.10 takes a
+        # filled buffer for uninitialized memory and reports every accumulator update
         for buf in (self.sums, self.sums_sq, self.invalid, self.cutoffs):
-            cl.enqueue_fill_buffer(self.queue, buf, np.zeros(1, np.float32), 0, buf.size)
+            cl.enqueue_copy(self.queue, buf, np.zeros(buf.size // 4, np.uint32))
         self.samples_done = 0
         self.seconds = 0.0
 

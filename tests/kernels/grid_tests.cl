@@ -27,14 +27,14 @@
                     light_tris, media, grids, grid_data, params, phase_lobes, phase_tables}
 
 /* grid_lookup of descriptor `grid` at local points (3 floats each). */
-__kernel void lookups(__global const GridVolume *grids, __global const float *grid_data,
+VOLCL_KERNEL void lookups(__global const GridVolume *grids, __global const float *grid_data,
                       __global const float *points, __global float *out, int grid) {
     int i = get_global_id(0);
     vstore3(grid_lookup(grid_data, &grids[grid], vload3(i, points)), i, out);
 }
 
 /* Work item i: ray i % nrays (o, d, t_max as 7 floats), estimate number i / nrays. */
-__kernel void shadow_rays(SCENE_ARGS, __global const float *rays, __global float *out, __global uint *cutoffs,
+VOLCL_KERNEL void shadow_rays(SCENE_ARGS, __global const float *rays, __global float *out, __global uint *cutoffs,
                           int nrays, int medium, uint seed) {
     int i = get_global_id(0);
     SceneData sc = SCENE_INIT;
@@ -47,7 +47,7 @@ __kernel void shadow_rays(SCENE_ARGS, __global const float *rays, __global float
 }
 
 /* Free flights with path weight (1, 1, 1): out = t, scattered, weight.xyz per work item. */
-__kernel void free_flights(SCENE_ARGS, __global const float *rays, __global float *out, __global uint *cutoffs,
+VOLCL_KERNEL void free_flights(SCENE_ARGS, __global const float *rays, __global float *out, __global uint *cutoffs,
                            int nrays, int medium, uint seed) {
     int i = get_global_id(0);
     SceneData sc = SCENE_INIT;
