@@ -135,7 +135,23 @@ typedef struct {
     int phase_lobe;     /* PHASE_LOBES: the first of its lobes in phase_lobes */
     float emission[3];  /* homogeneous: sigma_a * radiance (per unit length); heterogeneous: radiance */
     int phase_lobe_count;
+    /* heterogeneous media with a spatially varying emission (VOLCL_HAS_EMISSIVE_MEDIA): the medium
+     * emits sigma_a(x) * Le(x), Le = emission_scale * the emission grid's value (EMISSION_RADIANCE),
+     * or emission_scale * the blackbody colour of (value - temperature_offset) * temperature_scale
+     * (EMISSION_TEMPERATURE), read from the table at grid_data[blackbody] (volcl/blackbody.py) */
+    int emission_mode;
+    int emission_grid;
+    float emission_scale;
+    int blackbody;
+    float temperature_scale;
+    float temperature_offset;
+    int emission_sampler;   /* emission NEE: offset of the medium's EmissionSampler words, or -1 */
+    int pad0;
 } Medium;
+
+#define EMISSION_CONSTANT 0     /* emission[] alone (or nothing) */
+#define EMISSION_RADIANCE 1
+#define EMISSION_TEMPERATURE 2
 
 #define LOBE_ISOTROPIC 0
 #define LOBE_HG 1               /* p[0] = g */
@@ -157,12 +173,19 @@ typedef struct {
 #define GRID_TRILINEAR 0
 #define GRID_NEAREST 1
 
+#define GRID_DENSE 0
+#define GRID_SPARSE 1   /* bricks of 8^3 voxels (OpenVDB and NanoVDB files; VOLCL_HAS_SPARSE_GRIDS) */
+
 /* A grid of 1 or 3 channels filling the unit cube [0,1]^3 of its own frame (kernels/grid.h has the
  * lookup conventions). Voxel (x, y, z) channel c is grid_data[data + ((z * res[1] + y) * res[0] + x)
  * * channels + c], the .vol file's order. Extinction grids carry the medium's scale already, and a
  * coarse majorant grid of maj_res cells over the same cube at grid_data[majorants], x fastest: each
  * cell the largest value (over channels) that a lookup anywhere in the cell can return. Constant
- * volumes are 1x1x1 grids. */
+ * volumes are 1x1x1 grids. A sparse grid (layout GRID_SPARSE) has res voxels in bricks of 8^3:
+ * grid_data[data] starts its brick index (res / 8 entries, x fastest, int32 bit patterns): an entry
+ * e >= 0 is the offset of the brick's voxels (z slowest, x fastest, channels interleaved), e < 0
+ * the offset -1 - e of the one value every voxel of the brick holds; its majorant cells are the
+ * bricks (maj_res = res / 8). */
 typedef struct {
     float to_local[12];     /* world -> unit cube, row-major 3x4 */
     int res[3];
@@ -171,7 +194,8 @@ typedef struct {
     int filter;
     int data;
     int majorants;          /* -1 without a majorant grid */
-    int pad0[2];
+    int layout;             /* GRID_DENSE | GRID_SPARSE */
+    int pad0;
 } GridVolume;
 
 /* RenderParams.equiangular: how point-light direct lighting in homogeneous media is estimated */

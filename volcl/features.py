@@ -22,6 +22,7 @@ FLAGS = (
     "HG",                   # an anisotropic (Henyey-Greenstein) phase function
     "EMISSIVE_MEDIA",       # a medium that emits light
     "GRID_MEDIA",           # a heterogeneous medium: grid lookups, delta and ratio tracking
+    "SPARSE_GRIDS",         # a grid in bricks (OpenVDB / NanoVDB files: kernels/grid.h)
     "EQUIANGULAR",          # equiangular sampling towards point lights in homogeneous media
     "CYLINDERS",            # analytic cylinder primitives (Mitsuba's cylinder)
     "THINLENS",             # a thin-lens camera (depth of field)
@@ -42,9 +43,13 @@ def _chromatic(sigma_t) -> bool:
     if isinstance(sigma_t, Volume):
         if sigma_t.kind == "const":
             return bool(np.ptp(sigma_t.value) > 0)
-        data = sigma_t.data
+        data = sigma_t.values()
         return data.shape[-1] == 3 and bool(np.any(data.max(axis=-1) != data.min(axis=-1)))
     return bool(np.ptp(np.asarray(sigma_t, dtype=float)) > 0)
+
+
+def _volumes_of(medium) -> list:
+    return [medium.sigma_t, medium.albedo, medium.emission_volume]
 
 
 def detect(scene: Scene) -> dict[str, bool]:
@@ -73,8 +78,9 @@ def detect(scene: Scene) -> dict[str, bool]:
     phase_kinds = {device_kind(m.phase) for m in media}
     f["HG"] = "hg" in phase_kinds
     f["PHASE_FAMILIES"] = "lobes" in phase_kinds
-    f["EMISSIVE_MEDIA"] = any(m.radiance is not None and np.any(np.asarray(m.radiance) > 0) for m in media)
+    f["EMISSIVE_MEDIA"] = any(m.emissive for m in media)
     f["GRID_MEDIA"] = any(m.kind == "heterogeneous" for m in media)
+    f["SPARSE_GRIDS"] = any(isinstance(v, Volume) and v.kind == "sparse" for m in media for v in _volumes_of(m))
     # the estimator's default ('auto'): worth compiling where a point light sits inside a medium
     f["EQUIANGULAR"] = f["POINT_LIGHTS"] and any(m is not None for m in point_light_media(scene))
     return f

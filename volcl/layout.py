@@ -88,7 +88,11 @@ MEDIUM = np.dtype([
     ("sigma_t", *f3), ("albedo_grid", np.int32),
     ("albedo", *f3), ("phase_lobe", np.int32),
     ("emission", *f3), ("phase_lobe_count", np.int32),
+    ("emission_mode", np.int32), ("emission_grid", np.int32), ("emission_scale", np.float32),
+    ("blackbody", np.int32), ("temperature_scale", np.float32), ("temperature_offset", np.float32),
+    ("emission_sampler", np.int32), ("pad0", np.int32),
 ])
+EMISSION_MODES = {"none": 0, "radiance": 1, "temperature": 2}
 
 # One lobe of a mixture phase function (kernels/types.h says what `p` holds for each type); a
 # table is a piecewise-linear density at phase_tables[table ...]: knots, densities, CDF.
@@ -99,12 +103,13 @@ PHASE_LOBE = np.dtype([
 ])
 
 GRID_FILTERS = {"trilinear": 0, "nearest": 1}
+GRID_LAYOUTS = {"dense": 0, "sparse": 1}
 # A grid of 1 or 3 channels filling its unit cube; voxels and majorant cells live in one float
 # buffer at offsets `data` and `majorants` (see kernels/types.h).
 GRID_VOLUME = np.dtype([
     ("to_local", np.float32, 12), ("res", np.int32, 3), ("channels", np.int32),
     ("maj_res", np.int32, 3), ("filter", np.int32),
-    ("data", np.int32), ("majorants", np.int32), ("pad0", np.int32, 2),
+    ("data", np.int32), ("majorants", np.int32), ("layout", np.int32), ("pad0", np.int32),
 ])
 
 RENDER_PARAMS = np.dtype([

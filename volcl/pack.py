@@ -90,7 +90,8 @@ def _pack_bsdfs(bsdfs):
 
 def _pack_media(media, grids: GridPacker, phases: PhasePacker):
     arr = np.zeros(max(len(media), 1), layout.MEDIUM)
-    arr["sigma_t_grid"] = arr["albedo_grid"] = -1
+    arr["sigma_t_grid"] = arr["albedo_grid"] = arr["emission_grid"] = -1
+    arr["blackbody"] = arr["emission_sampler"] = -1
     for i, m in enumerate(media):
         r = arr[i]
         r["type"] = layout.MEDIUM_TYPES[m.kind]
@@ -101,6 +102,8 @@ def _pack_media(media, grids: GridPacker, phases: PhasePacker):
             r["albedo_grid"] = grids.add(m.albedo)
             if m.radiance is not None:
                 r["emission"] = m.radiance
+            if m.emission_kind != "none":
+                _pack_emission(r, m, grids)
             continue
         sigma_t = np.asarray(m.sigma_t, dtype=np.float64) * m.scale
         albedo = np.asarray(m.albedo, dtype=np.float64)
@@ -108,6 +111,16 @@ def _pack_media(media, grids: GridPacker, phases: PhasePacker):
         if m.radiance is not None:
             r["emission"] = sigma_t * (1.0 - albedo) * m.radiance
     return arr
+
+
+def _pack_emission(r, m, grids: GridPacker) -> None:
+    """A heterogeneous medium's spatially varying emission: its grid, scales and the blackbody table."""
+    r["emission_mode"] = layout.EMISSION_MODES[m.emission_kind]
+    r["emission_grid"] = grids.add(m.emission_volume)
+    r["emission_scale"] = m.emission_scale
+    if m.emission_kind == "temperature":
+        r["blackbody"] = grids.blackbody_table()
+        r["temperature_scale"], r["temperature_offset"] = m.temperature_scale, m.temperature_offset
 
 
 def filter_profile(f: Filter, x: np.ndarray) -> np.ndarray:
@@ -372,7 +385,7 @@ class Packer:
         media = _pack_media(self.media, grids, phases)
         grid_desc, grid_data = grids.arrays()
         phase_lobes, phase_tables = phases.arrays()
-        self.stats.update(grid_voxels=grids.voxels, majorant_cells=grids.majorant_count,
+        self.stats.update(grid_voxels=grids.voxels, majorant_cells=grids.majorant_count, sparse_grids=grids.sparse,
                           phase_table_ratio_error=max(phases.ratio_errors, default=0.0))
         self.arrays.update(media=media, grids=grid_desc, grid_data=grid_data, phase_lobes=phase_lobes,
                            phase_tables=phase_tables)

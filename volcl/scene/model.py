@@ -45,13 +45,35 @@ class Phase:
 
 @dataclass
 class Volume:
-    """A scalar or rgb field. kind 'const': value only. kind 'grid': data of shape (z, y, x, c)."""
-    kind: str                        # 'const' | 'grid'
+    """A scalar or rgb field. kind 'const': value only. kind 'grid': data of shape (z, y, x, c).
+    kind 'sparse': an OpenVDB or NanoVDB grid in bricks (volcl.vdb.SparseGrid), filling the unit
+    cube of to_world as a grid of sparse.padded_counts() * 8 voxels would."""
+    kind: str                        # 'const' | 'grid' | 'sparse'
     value: np.ndarray = field(default_factory=lambda: rgb(1.0))
     data: Optional[np.ndarray] = None
     to_world: np.ndarray = field(default_factory=lambda: np.eye(4))
     filter: str = "trilinear"        # 'trilinear' | 'nearest'
     filename: str = ""
+    sparse: Optional[object] = None  # volcl.vdb.SparseGrid
+    grid_name: str = ""              # sparse: the grid's name in its file
+
+    @property
+    def channels(self) -> int:
+        if self.kind == "grid":
+            return self.data.shape[-1]
+        if self.kind == "sparse":
+            return self.sparse.channels
+        return 1 if np.ptp(self.value) == 0 else 3
+
+    def values(self) -> np.ndarray:
+        """Every value the field holds, (n, channels) or (3,) for a constant (range checks)."""
+        if self.kind == "grid":
+            return self.data
+        if self.kind == "sparse":
+            sg = self.sparse
+            return np.concatenate([sg.bricks.reshape(-1, sg.channels), sg.tile_values.reshape(-1, sg.channels),
+                                   sg.background.reshape(1, -1)])
+        return self.value
 
 
 @dataclass
@@ -64,6 +86,17 @@ class Medium:
     radiance: Optional[np.ndarray] = None    # volcl extension: emits sigma_a * radiance
     id: str = ""
     source: Optional[Source] = None
+    # volcl extension, heterogeneous media: a spatially varying emission, either the radiance
+    # itself ('radiance') or a temperature (volcl.blackbody) ('temperature'); times emission_scale
+    emission_kind: str = "none"               # 'none' | 'radiance' | 'temperature'
+    emission_volume: Optional[Volume] = None
+    emission_scale: float = 1.0
+    temperature_scale: float = 1.0
+    temperature_offset: float = 0.0
+
+    @property
+    def emissive(self) -> bool:
+        return self.emission_kind != "none" or (self.radiance is not None and bool(np.any(self.radiance > 0)))
 
 
 @dataclass

@@ -24,7 +24,11 @@ from .shapes import bounds
 
 _TO_WORLD = {"to_world": "transform"}
 _MEDIUM_PARAMS = {"sigma_t": "color", "albedo": "color", "scale": "float",
-                  "has_spectral_extinction": "bool", "volcl_radiance": "color"}
+                  "has_spectral_extinction": "bool", "volcl_radiance": "color",
+                  "volcl_temperature": "float", "volcl_temperature_scale": "float",
+                  "volcl_temperature_offset": "float", "volcl_emission_scale": "float"}
+# the volumes a heterogeneous medium may hold, and whether each must be a one-channel (float) grid
+_MEDIUM_VOLUMES = {"sigma_t": False, "albedo": False, "volcl_radiance": False, "volcl_temperature": True}
 _MEDIUM_NOTES = {"sample_emitters": "volcl always samples emitters from medium vertices; the expected "
                                     "image is the same, only the noise differs"}
 _PATH_PARAMS = {"max_depth": "int", "rr_depth": "int", "hide_emitters": "bool"}
@@ -76,6 +80,7 @@ SPECS = {
                            ignored={"raw": "in RGB rendering the grid's values are used as they are either way",
                                     "accel": "volcl uses its own lookups (same values)"}),
         "constvolume": Spec({"value": "color", **_TO_WORLD}),
+        "volcl_vdb": Spec({"filename": "string", "grid": "string", "filter_type": "string", **_TO_WORLD}),
     },
     "phase": PHASE_SPECS,
 }
@@ -327,6 +332,7 @@ def build_emitter(node: Node):
 
 def build_medium(node: Node) -> Medium:
     phase = node.single("phase")
+    volumes = {}
     if node.type == "homogeneous":
         sigma_t = node.nonneg_color("sigma_t", 1.0)
         albedo = node.unit_color("albedo", 0.75)
@@ -345,6 +351,7 @@ def build_medium(node: Node) -> Medium:
                     radiance=node.nonneg_color("volcl_radiance", kind="emission")
                     if node.has("volcl_radiance") else None,
                     id=node.element.attrs.get("id", ""), source=node.source())
+    _emission(node, medium, volumes)
     objects.check_medium(node, medium)
     _spectral_extinction(node, medium)
     return medium
@@ -370,13 +377,65 @@ def _spectral_extinction(node: Node, medium: Medium) -> None:
 def _named_volumes(node: Node) -> dict:
     volumes = {}
     for child in node.objects("volume"):
-        if child.name not in ("sigma_t", "albedo"):
-            raise child.element.error(f"a volume inside a medium needs name=\"sigma_t\" or "
-                                      f"name=\"albedo\", got name={child.name!r}")
+        if child.name not in _MEDIUM_VOLUMES:
+            raise child.element.error("a volume inside a medium needs name=" + ", ".join(
+                f'"{n}"' for n in _MEDIUM_VOLUMES) + f", got name={child.name!r}")
         if child.name in volumes or node.has(child.name):
             raise child.element.error(f"'{child.name}' is given twice")
+        if _MEDIUM_VOLUMES[child.name] or child.name == "sigma_t" and child.obj.kind == "sparse":
+            _one_channel(child)
         volumes[child.name] = child
     return volumes
+
+
+def _one_channel(child) -> None:
+    v = child.obj
+    if v.kind != "const" and v.channels != 1:
+        what = (f"grid '{v.grid_name}' of {v.filename} holds {v.sparse.value_type} values"
+                if v.kind == "sparse" else f"{v.filename} holds {v.channels} channels")
+        raise child.element.error(f"'{child.name}' needs a float grid, but {what}; choose a float grid "
+                                  f"(density, temperature, ...)")
+
+
+def _emission(node: Node, medium: Medium, volumes: dict) -> None:
+    """volcl_radiance (a colour, or a volume in a heterogeneous medium) or volcl_temperature (a float,
+    or a volume in a heterogeneous medium, with pbrt-v4's blackbody meaning: volcl.blackbody), each
+    times volcl_emission_scale. A constant temperature becomes the radiance of its blackbody."""
+    from .. import blackbody
+    temp_params = ("volcl_temperature_scale", "volcl_temperature_offset")
+    has_temp = node.has("volcl_temperature") or "volcl_temperature" in volumes
+    has_radiance = node.has("volcl_radiance") or "volcl_radiance" in volumes
+    if has_temp and has_radiance:
+        where = volumes["volcl_temperature"].element if "volcl_temperature" in volumes else node.at("volcl_temperature")
+        raise where.error("a medium emits from 'volcl_radiance' or from 'volcl_temperature', not both")
+    for name in temp_params:
+        if node.has(name) and not has_temp:
+            node.ctx.warn(node.at(name), f"'{name}' is ignored: the medium has no 'volcl_temperature'")
+    medium.emission_scale = node.checked("volcl_emission_scale", checks.nonneg, "volcl_emission_scale",
+                                         node.float("volcl_emission_scale", 1.0))
+    medium.temperature_scale = node.checked("volcl_temperature_scale", checks.nonneg, "volcl_temperature_scale",
+                                            node.float("volcl_temperature_scale", 1.0))
+    medium.temperature_offset = node.float("volcl_temperature_offset", 0.0)
+    if not np.isfinite(medium.temperature_offset):
+        raise node.fail("volcl_temperature_offset", "'volcl_temperature_offset' must be finite")
+    if node.has("volcl_emission_scale") and not (has_temp or has_radiance):
+        node.ctx.warn(node.at("volcl_emission_scale"), "'volcl_emission_scale' is ignored: the medium "
+                                                       "has no 'volcl_radiance' or 'volcl_temperature'")
+    for name in ("volcl_radiance", "volcl_temperature"):
+        if name in volumes and volumes[name].obj.kind != "const":
+            medium.emission_kind = name[len("volcl_"):]
+            medium.emission_volume = volumes[name].obj
+            objects.check_volume_range(volumes[name].element, name, medium.emission_volume, None)
+            return
+    if has_temp:
+        value = (float(volumes["volcl_temperature"].obj.value[0]) if "volcl_temperature" in volumes
+                 else node.float("volcl_temperature"))
+        t = (value - medium.temperature_offset) * medium.temperature_scale
+        medium.radiance = medium.emission_scale * blackbody.rgb(t)
+    elif "volcl_radiance" in volumes:
+        medium.radiance = medium.emission_scale * np.asarray(volumes["volcl_radiance"].obj.value, np.float64)
+    elif medium.radiance is not None:
+        medium.radiance = medium.emission_scale * medium.radiance
 
 
 def _volume_param(node: Node, volumes: dict, name: str, default: float, upper) -> Volume:
@@ -392,6 +451,8 @@ def build_volume(node: Node) -> Volume:
     if node.type == "constvolume":
         return Volume("const", value=node.color("value", 1.0, kind="unbounded"),
                       to_world=node.transform("to_world"))
+    if node.type == "volcl_vdb":
+        return objects.vdb_volume(node)
     node.choice("wrap_mode", ("clamp",), "clamp")
     data, path, bbox = objects.grid_from_file(node, "filename")
     to_world = node.transform("to_world")
