@@ -8,7 +8,7 @@ A `Packer` holds what depends on the scene's structure only (which objects exist
 uses which bsdf, light and media: the indices the arrays refer to each other by) and packs the
 arrays in parts, so that an edited value (volcl.params) repacks only the part it lives in:
 
-    geometry   triangles, normals, spheres, cylinders, BVH             vertex positions, transforms
+    geometry   triangles, normals, spheres, cylinders, BVH (nodes, leaves) vertex positions, transforms
     lights     light records, area-light triangle CDFs              emitter values, geometry
     shapes     per-shape bsdf, light and media indices              structure only
     bsdfs      bsdf records                                         bsdf colours and IORs
@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import layout
-from .bvh import build_bvh
+from .bvh_wide import device_bvh, empty_wide
 from .features import detect
 from .grids import GridPacker
 from .mesh import triangle_areas32
@@ -38,7 +38,7 @@ FILTER_TABLE_SIZE = 4097
 
 # part -> the arrays it packs, in the order parts are packed (shapes name the lights)
 PARTS = {
-    "geometry": ("nodes", "prim_ids", "triangles", "normals", "spheres", "cylinders"),
+    "geometry": ("nodes", "leaves", "triangles", "normals", "spheres", "cylinders"),
     "lights": ("lights", "light_tri_cdf", "light_tris"),
     "shapes": ("shapes",),
     "bsdfs": ("bsdfs",),
@@ -46,7 +46,7 @@ PARTS = {
     "camera": ("filter_table",),
 }
 # the kernel's buffer arguments, in order (kernels/render.cl)
-ARG_ORDER = ("nodes", "prim_ids", "triangles", "normals", "spheres", "cylinders", "shapes", "bsdfs", "lights",
+ARG_ORDER = ("nodes", "leaves", "triangles", "normals", "spheres", "cylinders", "shapes", "bsdfs", "lights",
              "light_tri_cdf", "light_tris", "media", "grids", "grid_data", "params", "filter_table",
              "phase_lobes", "phase_tables")
 
@@ -294,17 +294,21 @@ class Packer:
         codes = np.concatenate(codes)
         t0 = time.perf_counter()
         if len(codes):
-            nodes, order = build_bvh(np.concatenate(lo), np.concatenate(hi), max_leaf=self.max_leaf)
-            prim_ids = codes[order].astype(np.int32)
+            # shadow rays stop at the first opaque surface (kernels/bvh.h TRACE_SHADOW); a shape's
+            # bsdf kind is structure, so the mask never needs repacking after an edit
+            shape_opaque = np.array([s.bsdf.kind != "null" for s in self.scene.shapes], bool)
+            analytic_shape = np.array([self.shape_index[id(s)] for s in self.sphere_shapes + self.cylinder_shapes],
+                                      np.int64)
+            opaque = np.concatenate([shape_opaque[tri_shape], shape_opaque[analytic_shape]])
+            nodes, leaves = device_bvh(codes, np.concatenate(lo), np.concatenate(hi), tri_v, opaque,
+                                       max_leaf=self.max_leaf)
             self.bounds = (np.concatenate(lo).min(0), np.concatenate(hi).max(0))
         else:
-            nodes = np.zeros(1, layout.BVH_NODE)
-            nodes["bmin"], nodes["bmax"], nodes["count"] = np.inf, -np.inf, 1
-            prim_ids = np.zeros(1, np.int32)
+            nodes, leaves = empty_wide(), np.zeros(1, layout.LEAF_PACKET)
             self.bounds = (np.zeros(3), np.zeros(3))
         self.bvh_seconds = time.perf_counter() - t0
         self.triangle_count = ntri
-        self.arrays.update(nodes=nodes, prim_ids=prim_ids, triangles=tris, normals=normals, spheres=spheres,
+        self.arrays.update(nodes=nodes, leaves=leaves, triangles=tris, normals=normals, spheres=spheres,
                            cylinders=cylinders)
 
     def _pack_lights(self):
