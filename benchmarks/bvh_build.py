@@ -2,8 +2,10 @@
 
 Each soup is a tessellated bumpy sphere (about 70 % of the triangles, with sliver triangles at the
 poles) plus small random triangles scattered in a shell around it. Prints machine info, then one
-table row per size: build time (best of --repeat runs), SAH cost, node count, node memory per
-triangle, maximum depth and average leaf size.
+table row per size: binary build time (best of --repeat runs), SAH cost, node count, node memory
+per triangle, maximum depth and average leaf size; then the device's wide BVH collapsed from it
+(volcl.bvh_wide): collapse time, wide nodes, children per node, the deepest traversal stack, and
+bytes per triangle of the wide nodes and of the leaf packets.
 
     python benchmarks/bvh_build.py [--sizes 100000 1000000] [--repeat 3] [--max-leaf 4] [--bins 16]
 """
@@ -18,6 +20,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from volcl.bvh import build_bvh, node_depths, sah_cost  # noqa: E402
+from volcl.bvh_wide import collapse, pack_leaves, stack_need, used_slots  # noqa: E402
 from common import bumpy_sphere, cpu_model  # noqa: E402
 
 
@@ -47,7 +50,16 @@ def measure(n, repeat, max_leaf, bins):
         nodes, order = build_bvh(lo, hi, max_leaf=max_leaf, bins=bins)
         best = min(best, time.perf_counter() - start)
     leaves = nodes["count"] > 0
+    best_c = np.inf
+    for _ in range(repeat):
+        start = time.perf_counter()
+        wide = collapse(nodes)
+        best_c = min(best_c, time.perf_counter() - start)
+    wide, packets = pack_leaves(wide, np.arange(n, dtype=np.int32)[order], tris, np.ones(n, bool))
+    used = used_slots(wide)
     return {
+        "collapse s": best_c, "wide nodes": len(wide), "children": used.sum() / len(wide),
+        "stack": stack_need(wide), "wide B/tri": wide.nbytes / n, "packet B/tri": packets.nbytes / n,
         "triangles": n,
         "build s": best,
         "SAH cost": sah_cost(nodes),
@@ -73,10 +85,20 @@ def main():
              f"{'max depth':>9} {'avg leaf':>8}"
     print(header)
     print("-" * len(header))
+    wide = []
     for n in args.sizes:
         r = measure(n, args.repeat, args.max_leaf, args.bins)
         print(f"{r['triangles']:>10} {r['build s']:>8.3f} {r['SAH cost']:>9.2f} {r['nodes']:>9} "
               f"{r['B/tri']:>6.1f} {r['max depth']:>9} {r['avg leaf']:>8.2f}", flush=True)
+        wide.append(r)
+    header = f"{'triangles':>10} {'collapse s':>10} {'wide nodes':>10} {'children':>8} {'stack':>5} " \
+             f"{'node B/tri':>10} {'packet B/tri':>12}"
+    print()
+    print(header)
+    print("-" * len(header))
+    for r in wide:
+        print(f"{r['triangles']:>10} {r['collapse s']:>10.3f} {r['wide nodes']:>10} {r['children']:>8.2f} "
+              f"{r['stack']:>5} {r['wide B/tri']:>10.1f} {r['packet B/tri']:>12.1f}")
 
 
 if __name__ == "__main__":

@@ -1,22 +1,28 @@
-"""Render throughput of volcl against Mitsuba 3, volcl's kernel build time, and its scene memory.
+"""Render throughput of volcl against Mitsuba 3 on every shipped scene, volcl's kernel build time,
+and its scene memory.
 
-    python benchmarks/render_throughput.py [--scene scenes/cbox.xml] [--spp 256] [--repeat 3]
-        [--max-depth 1 2 -1] [--mitsuba-python PATH] [--variant llvm_ad_rgb]
-        [--mesh-triangles 1000000] [-D name=value ...]
+    python benchmarks/render_throughput.py [--scenes scenes/*.xml] [--size 128x128] [--spp 128]
+        [--rounds 2] [--max-depth D] [--mitsuba-python PATH] [--variant llvm_ad_rgb]
+        [--skip-build] [--mesh-triangles 1000000] [-D name=value ...]
 
 Prints, in Markdown:
 
-* the machine: CPU model, cores, the OpenCL device volcl renders on, the Mitsuba found.
-* Throughput: the scene (default scenes/cbox.xml, 256x256) rendered at --spp samples per pixel by
-  volcl (kernel specialized to the scene's features, the default) and by Mitsuba 3 (--variant,
-  default llvm_ad_rgb, the same file and spp), once per --max-depth value (passed as the scene
-  parameter `max_depth`: 1 = emitters seen directly, 2 = direct lighting, -1 = unlimited paths).
-  "seconds" is the best of --repeat warm renders: volcl after a 1-spp warm-up pass on the same
-  Renderer (so neither kernel build nor PoCL's first-launch compilation counts), Mitsuba after one
-  untimed render (Dr.Jit traces and compiles on the first) with the clock stopped after
-  dr.eval + dr.sync_thread. "M samples/s" is width * height * spp / seconds / 1e6 (camera samples,
-  whatever the path length). "volcl/Mitsuba" is volcl's samples/s over Mitsuba's at the same
-  max_depth: above 1 volcl is faster. Both use every core of the machine.
+* the machine: CPU model, cores, the OpenCL device volcl renders on, the Mitsuba found, the load.
+* Throughput: each scene at --size and --spp (the scene parameters width, height and spp; Nori
+  files, which Mitsuba cannot read, get volcl's figures alone), seed 0, measured two ways:
+  - whole process: `volcl render SCENE -o OUT.exr` and Mitsuba's own command line
+    (`mitsuba -m VARIANT -o OUT.exr SCENE`, next to --mitsuba-python) from start to exit: what a
+    user waits for, Python start-up, scene loading, kernel builds (from warm on-disk caches: one
+    untimed run of each first) and the image file included;
+  - render alone: volcl's Renderer.render after a 1-spp warm-up pass on the same Renderer (so
+    neither kernel build nor PoCL's first-launch compilation counts); Mitsuba's mi.render after
+    one untimed render (Dr.Jit traces and compiles on the first), the clock stopped after
+    dr.eval + dr.sync_thread (benchmarks/mitsuba_ref.py).
+  Each figure is the best of --rounds, the four measurements of a scene interleaved in every
+  round so that load from other processes falls on both renderers alike. Seconds are wall time;
+  "CPU s" is the process's CPU time over all its threads (both renderers use every core), which
+  load from other processes on the machine disturbs less. "volcl/Mitsuba" is Mitsuba's time over
+  volcl's: above 1 volcl is faster.
 * Kernel build: seconds for clBuildProgram of the render program (Renderer.build_seconds) and the
   extra time of the first 1-spp pass over a second one (PoCL compiles the work-group function
   lazily at the first launch), each in a fresh Python process: "cold" with empty pyopencl/PoCL
@@ -41,6 +47,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import platform
 import subprocess
 import sys
@@ -97,19 +104,63 @@ def load_scene(path, defines):
     return scene
 
 
-def volcl_throughput(path, defines, spp, repeat, seed, device):
-    """(best seconds, width, height, invalid samples) of `repeat` warm renders."""
+def cpu_seconds(who=resource.RUSAGE_SELF):
+    r = resource.getrusage(who)
+    return r.ru_utime + r.ru_stime
+
+
+def volcl_renderer(path, defines, size, seed, device):
+    """A Renderer for the scene at size (width, height), warmed up by a 1-spp pass (PoCL compiles
+    the work-group function at the first launch)."""
     from volcl.renderer import Renderer
     scene = load_scene(path, defines)
+    scene.camera.width, scene.camera.height = size
     r = Renderer(scene, device=device, seed=seed)
-    r.render(1)             # first launch: PoCL compiles the work-group function here
-    best, invalid = float("inf"), 0
-    for _ in range(repeat):
-        r.reset()
-        res = r.render(spp)
-        best = min(best, res.seconds)
-        invalid = max(invalid, res.invalid)
-    return best, r.width, r.height, invalid
+    r.render(1)
+    return r
+
+
+def volcl_render_alone(r, spp):
+    """(wall seconds, CPU seconds, invalid samples) of one render of spp samples per pixel."""
+    r.reset()
+    c0 = cpu_seconds()
+    res = r.render(spp)
+    return res.seconds, cpu_seconds() - c0, res.invalid
+
+
+def whole_process(cmd, cwd):
+    """(wall seconds, CPU seconds) of a command run to its end; raises on failure."""
+    c0, t0 = cpu_seconds(resource.RUSAGE_CHILDREN), time.perf_counter()
+    proc = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True)
+    wall, cpus = time.perf_counter() - t0, cpu_seconds(resource.RUSAGE_CHILDREN) - c0
+    if proc.returncode != 0:
+        raise RuntimeError(f"{cmd[0]} failed (exit {proc.returncode}):\n{proc.stderr[-2000:]}")
+    return wall, cpus
+
+
+def volcl_command(path, defines, size, spp, out, device):
+    cmd = [sys.executable, "-m", "volcl", "render", str(path), "-o", str(out), "--spp", str(spp), "--seed", "0",
+           "--width", str(size[0]), "--height", str(size[1]), "-q"]
+    if device:
+        cmd += ["--device", device]
+    for k, v in defines.items():
+        cmd += ["-D", f"{k}={v}"]
+    return cmd
+
+
+def mitsuba_command(mts_python, variant, path, defines, size, spp, out):
+    exe = Path(mts_python).parent / "mitsuba"
+    cmd = [str(exe), "-m", variant, "-o", str(out), "-D", f"spp={spp}", "-D", f"width={size[0]}",
+           "-D", f"height={size[1]}"]
+    for k, v in defines.items():
+        cmd += ["-D", f"{k}={v}"]
+    return cmd + [str(path)]
+
+
+def is_mitsuba_file(path):
+    from volcl.scene.xml import parse_file
+    root = parse_file(str(path))
+    return root.tag == "scene" and "version" in root.attrs
 
 
 BUILD_PROBE = r"""
@@ -179,20 +230,43 @@ def memory_row(label, renderer):
     total = sum(sizes.values())
     per = lambda *names: f"{sum(sizes[n] for n in names) / max(ntri, 1):.1f}"   # noqa: E731
     return [label, f"{ntri:,}", renderer.packed.sphere_count, f"{total / 2**20:.2f}",
-            f"{total / max(ntri, 1):.1f}", per("nodes", "prim_ids"), per("triangles", "normals"),
+            f"{total / max(ntri, 1):.1f}", per("nodes", "leaves"), per("triangles", "normals"),
             f"{renderer.packed.bvh_seconds:.2f}"]
+
+
+def _measure(kind, path, defs, args, mts, device, renderers, tmp, warmup):
+    """One measurement: (wall s, CPU s[, invalid samples])."""
+    out = tmp / f"{path.stem}.{kind.split()[0]}.exr"
+    size = tuple(int(x) for x in args.size.lower().split("x"))
+    if kind == "volcl whole":
+        return whole_process(volcl_command(path, defs, size, args.spp, out, args.device), ROOT)
+    if kind == "Mitsuba whole":
+        return whole_process(mitsuba_command(mts["python"], args.variant, path, defs, size, args.spp, out),
+                             path.parent)
+    if kind == "volcl render":
+        if path not in renderers:
+            renderers.clear()       # one scene's buffers on the device at a time
+            renderers[path] = volcl_renderer(path, defs, size, args.seed, device)
+        if warmup:
+            return None
+        return volcl_render_alone(renderers[path], args.spp)
+    if warmup:
+        return None
+    res = mitsuba_ref.render_mitsuba(str(path), None, mts["python"], args.variant, args.spp, args.seed,
+                                     dict(defs, width=str(size[0]), height=str(size[1])), 1, details=True)
+    return res["seconds"], res["cpu_seconds"]
 
 
 # ------------------------------------------------------------------------------------ main
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--scene", default=str(ROOT / "scenes" / "cbox.xml"))
-    p.add_argument("--spp", type=int, default=256)
-    p.add_argument("--repeat", type=int, default=3, help="timed renders per row; the best counts (default 3)")
+    p.add_argument("--scenes", nargs="+", type=Path, default=sorted((ROOT / "scenes").glob("*.xml")))
+    p.add_argument("--size", default="128x128", help="WIDTHxHEIGHT (default 128x128)")
+    p.add_argument("--spp", type=int, default=128)
+    p.add_argument("--rounds", type=int, default=2, help="rounds of every measurement; the best counts")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--max-depth", nargs="+", default=["1", "2", "-1"], metavar="D",
-                   help="max_depth values, one pair of rows each (default 1 2 -1); 'scene' = as in the file")
+    p.add_argument("--max-depth", default=None, help="max_depth for every scene (default: each scene's own)")
     p.add_argument("--variant", default=mitsuba_ref.DEFAULT_VARIANT)
     p.add_argument("--device", help="volcl device selector (default: $VOLCL_DEVICE or the first that builds)")
     p.add_argument("--mesh-triangles", type=int, default=1_000_000,
@@ -207,11 +281,15 @@ def main(argv=None):
     from volcl import device as devmod
     from volcl.renderer import Renderer
     defines = parse_defines(args.define)
-    scene_path = Path(args.scene).resolve()
+    width, height = (int(x) for x in args.size.lower().split("x"))
+    if args.max_depth is not None:
+        defines["max_depth"] = args.max_depth
     device = devmod.choose(args.device)
     mts = mitsuba_ref.locate(args.mitsuba_python, args.variant, log=print)
+    scenes = [pth.resolve() for pth in args.scenes]
+    scene_path = scenes[0]
 
-    print(f"# volcl render throughput: {scene_path.name}\n")
+    print("# volcl render throughput\n")
     print(f"- CPU: {cpu_model()}, {cores()} cores ({platform.machine()}, {platform.system()})")
     print(f"- volcl {__version__} device: {device.key} {device.name} ({device.platform_name}, "
           f"{device.device.max_compute_units} compute units)")
@@ -219,36 +297,57 @@ def main(argv=None):
         print(f"- Mitsuba {mts['version']} variant {args.variant} via {mts['python']}")
     else:
         print("- Mitsuba: not found, its columns are skipped")
-    print(f"- scene {scene_path}, {args.spp} spp, best of {args.repeat}")
+    print(f"- {width}x{height}, {args.spp} spp, best of {args.rounds} rounds"
+          + (f", max_depth {args.max_depth}" if args.max_depth is not None else ", each scene's max_depth"))
     print(f"- load average at start (1/5/15 min): {load_average()}; other processes on the machine skew timings\n")
 
-    # throughput
+    # throughput: per scene, per round, the four measurements interleaved
+    best = {}
+    renderers = {}
+    with tempfile.TemporaryDirectory(prefix="volcl-throughput-") as tmp:
+        for rnd in range(-1, args.rounds):          # round -1 warms every cache, untimed
+            for path in scenes:
+                mitsuba_ok = bool(mts) and is_mitsuba_file(path)
+                defs = dict(defines)
+                kinds = ["volcl whole", "volcl render"] + (["Mitsuba whole", "Mitsuba render"] if mitsuba_ok else [])
+                for kind in kinds:
+                    log(f"round {rnd + 1}: {path.name}: {kind} ...")
+                    try:
+                        r = _measure(kind, path, defs, args, mts, device, renderers, Path(tmp), rnd < 0)
+                    except (RuntimeError, mitsuba_ref.MitsubaError) as exc:
+                        log(str(exc))
+                        r = None
+                    if rnd < 0 or r is None:
+                        best.setdefault((path.name, kind), None)
+                        continue
+                    b = best.get((path.name, kind)) or {"wall": np.inf, "cpu": np.inf, "invalid": 0}
+                    b["wall"], b["cpu"] = min(b["wall"], r[0]), min(b["cpu"], r[1])
+                    b["invalid"] = max(b["invalid"], r[2] if len(r) > 2 else 0)
+                    best[(path.name, kind)] = b
     rows = []
-    for d in args.max_depth:
-        defs = dict(defines) if d == "scene" else dict(defines, max_depth=d)
-        log(f"volcl max_depth={d} ...")
-        secs, w, h, invalid = volcl_throughput(scene_path, defs, args.spp, args.repeat, args.seed, device)
-        samples = w * h * args.spp
-        v_rate = samples / secs
-        m_rate = None
-        m_cells = ["–", "–", "–"]
-        if mts:
-            log(f"Mitsuba {args.variant} max_depth={d} ...")
-            try:
-                res = mitsuba_ref.render_mitsuba(str(scene_path), None, mts["python"], args.variant, args.spp,
-                                                 args.seed, defs, args.repeat, details=True)
-                m_rate = res["width"] * res["height"] * args.spp / res["seconds"]
-                m_cells = [f"{res['seconds']:.3f}", f"{m_rate / 1e6:.2f}", "1.00"]
-            except mitsuba_ref.MitsubaError as exc:
-                log(str(exc))
-                m_cells = ["failed", "–", "–"]
-        ratio = f"{v_rate / m_rate:.2f}" if m_rate else "–"
-        note = f" ({invalid} invalid)" if invalid else ""
-        rows.append([d, "volcl", args.spp, f"{secs:.3f}", f"{v_rate / 1e6:.2f}{note}", ratio])
-        if mts:
-            rows.append([d, f"Mitsuba {args.variant}", args.spp] + m_cells)
-    print(f"## Throughput ({w}x{h}, {args.spp} spp)\n")
-    print(table(["max_depth", "renderer", "spp", "seconds", "M samples/s", "volcl/Mitsuba"], rows))
+    for path in scenes:
+        row = [path.name]
+        for what in ("whole", "render"):
+            v, m = best.get((path.name, f"volcl {what}")), best.get((path.name, f"Mitsuba {what}"))
+            cell = lambda b: "failed" if b is None else f"{b['wall']:.2f} / {b['cpu']:.2f}"   # noqa: E731
+            row += [cell(v), cell(m) if (path.name, f"Mitsuba {what}") in best else "–"]
+            if v and m:
+                row.append(f"{m['wall'] / v['wall']:.2f} / {m['cpu'] / v['cpu']:.2f}")
+            else:
+                row.append("–")
+        v = best.get((path.name, "volcl render"))
+        samples = width * height * args.spp
+        row.append(f"{samples / v['wall'] / 1e6:.2f}" if v else "–")
+        m = best.get((path.name, "Mitsuba render"))
+        row.append(f"{samples / m['wall'] / 1e6:.2f}" if m else "–")
+        if v and v["invalid"]:
+            row[0] += f" ({v['invalid']} invalid)"
+        rows.append(row)
+    print(f"## Throughput ({width}x{height}, {args.spp} spp)\n")
+    print(table(["scene", "volcl whole process s (wall / CPU)", "Mitsuba whole process s (wall / CPU)",
+                 "volcl/Mitsuba whole (wall / CPU)", "volcl render s (wall / CPU)",
+                 "Mitsuba render s (wall / CPU)", "volcl/Mitsuba render (wall / CPU)",
+                 "volcl M samples/s", "Mitsuba M samples/s"], rows))
     print()
 
     # kernel build
@@ -296,7 +395,7 @@ def main(argv=None):
         mrows.append(memory_row(f"synthetic mesh ({args.mesh_triangles:,} requested)", Renderer(mesh, device=device)))
     print("## Device memory of the scene buffers (volcl)\n")
     print(table(["scene", "triangles", "spheres", "total MiB", "bytes/triangle",
-                 "BVH (nodes + prim ids) bytes/tri", "triangles + normals bytes/tri", "BVH build s"], mrows))
+                 "BVH (nodes + leaf packets) bytes/tri", "triangles + normals bytes/tri", "BVH build s"], mrows))
     print(f"\nload average at end: {load_average()}")
     return 0
 

@@ -1,4 +1,5 @@
-/* Ray queries against the BVH: closest hit and any hit, over triangles and analytic spheres.
+/* Ray queries against the BVH: closest hit, any hit, and the shadow query (the closest hit on a
+ * null surface unless an opaque one is in the way), over triangles and analytic spheres.
  *
  * Triangles use the watertight test of Woop, Benthin and Wald (2013): the ray is sheared to +z and
  * edge functions decide coverage, so a ray through a shared edge or vertex hits at least one of the
@@ -10,11 +11,45 @@
 
 #include "cylinder.h"   /* analytic cylinders (VOLCL_HAS_CYLINDERS) */
 
-#define VOLCL_BVH_STACK 64
+/* Deepest stack a traversal can reach; volcl/bvh_wide.py STACK builds trees within it. */
+#define VOLCL_BVH_STACK 128
+
+#if VOLCL_BVH_WIDTH == 8
+typedef float8 floatW;
+typedef int8 intW;
+#define vloadW vload8
+#define vstoreW vstore8
+#elif VOLCL_BVH_WIDTH == 4
+typedef float4 floatW;
+typedef int4 intW;
+#define vloadW vload4
+#define vstoreW vstore4
+#else
+#error "VOLCL_BVH_WIDTH must be 4 or 8"
+#endif
+
+#if VOLCL_LEAF_WIDTH == 4
+typedef float4 floatL;
+typedef int4 intL;
+#define vloadL vload4
+#define vstoreL vstore4
+#elif VOLCL_LEAF_WIDTH == 8
+typedef float8 floatL;
+typedef int8 intL;
+#define vloadL vload8
+#define vstoreL vstore8
+#else
+#error "VOLCL_LEAF_WIDTH must be 4 or 8"
+#endif
+
+/* bvh_trace queries */
+#define TRACE_CLOSEST 0     /* the nearest hit */
+#define TRACE_ANY 1         /* whether anything is hit (the hit reported is not the nearest) */
+#define TRACE_SHADOW 2      /* the nearest hit, or some opaque hit (it is not searched beyond one) */
 
 typedef struct {
     float t;
-    int prim;       /* code from prim_ids: >= 0 triangle, < 0 analytic (sphere or cylinder, cylinder.h) */
+    int prim;       /* primitive code (LeafPacket.prim): >= 0 triangle, < 0 analytic (sphere or cylinder, cylinder.h) */
     float b1, b2;   /* barycentrics of p1 and p2 on triangles */
 } Hit;
 
@@ -45,33 +80,73 @@ inline Shear shear_make(float3 o, float3 d) {
     return s;
 }
 
-/* Vertices are read in the ray's permuted axis order straight from memory (p[k] with a per-ray k),
- * which costs an address computation instead of a select chain per component. */
+/* The watertight test on every lane of a leaf packet at once, for hits in (0, tmax); returns the
+ * lanes hit as a mask. Vertices are read in the ray's permuted axis order straight from memory
+ * (row 3 * vertex + k with a per-ray k), which costs an address computation instead of a select
+ * chain per component. Every lane does the operations of the scalar test in the same order, so a
+ * triangle rounds alike in whichever packet and lane it sits. */
 __attribute__((always_inline))
-inline bool triangle_intersect(__global const Triangle *tri, const Shear *sh, float tmax,
-                               float *t_out, float *b1_out, float *b2_out) {
+inline intL packet_triangles_hit(__global const LeafPacket *pk, const Shear *sh, float tmax, floatL *t_scaled,
+                                 floatL *det, floatL *e1, floatL *e2) {
     /* the edge functions must round identically for the two triangles sharing an edge, and a fused
      * multiply-add in one of them breaks that (and makes zero-size triangles report hits) */
 #pragma OPENCL FP_CONTRACT OFF
-    float az = tri->p0[sh->kz] - sh->oz, bz = tri->p1[sh->kz] - sh->oz, cz = tri->p2[sh->kz] - sh->oz;
-    float ax = (tri->p0[sh->kx] - sh->ox) - sh->sx * az, ay = (tri->p0[sh->ky] - sh->oy) - sh->sy * az;
-    float bx = (tri->p1[sh->kx] - sh->ox) - sh->sx * bz, by = (tri->p1[sh->ky] - sh->oy) - sh->sy * bz;
-    float cx = (tri->p2[sh->kx] - sh->ox) - sh->sx * cz, cy = (tri->p2[sh->ky] - sh->oy) - sh->sy * cz;
-    float u = cx * by - cy * bx;
-    float v = ax * cy - ay * cx;
-    float w = bx * ay - by * ax;
-    if ((u < 0.0f || v < 0.0f || w < 0.0f) && (u > 0.0f || v > 0.0f || w > 0.0f)) return false;
-    float det = u + v + w;
-    if (det == 0.0f) return false;
-    float t_scaled = (u * az + v * bz + w * cz) * sh->sz;
-    /* compare before dividing, with the sign of det folded in */
-    if (det < 0.0f ? (t_scaled >= 0.0f || t_scaled <= tmax * det) : (t_scaled <= 0.0f || t_scaled >= tmax * det))
-        return false;
-    float inv = 1.0f / det;
-    *t_out = t_scaled * inv;
-    *b1_out = v * inv;
-    *b2_out = w * inv;
-    return true;
+    __global const float *v = &pk->v[0][0];
+    const int L = VOLCL_LEAF_WIDTH;
+    floatL az = vloadL(0, v + L * sh->kz) - sh->oz;
+    floatL bz = vloadL(0, v + L * (3 + sh->kz)) - sh->oz;
+    floatL cz = vloadL(0, v + L * (6 + sh->kz)) - sh->oz;
+    floatL ax = (vloadL(0, v + L * sh->kx) - sh->ox) - sh->sx * az;
+    floatL ay = (vloadL(0, v + L * sh->ky) - sh->oy) - sh->sy * az;
+    floatL bx = (vloadL(0, v + L * (3 + sh->kx)) - sh->ox) - sh->sx * bz;
+    floatL by = (vloadL(0, v + L * (3 + sh->ky)) - sh->oy) - sh->sy * bz;
+    floatL cx = (vloadL(0, v + L * (6 + sh->kx)) - sh->ox) - sh->sx * cz;
+    floatL cy = (vloadL(0, v + L * (6 + sh->ky)) - sh->oy) - sh->sy * cz;
+    floatL u = cx * by - cy * bx;
+    *e1 = ax * cy - ay * cx;
+    *e2 = bx * ay - by * ax;
+    const floatL zero = (floatL)(0.0f);
+    intL outside = ((u < zero) | (*e1 < zero) | (*e2 < zero)) & ((u > zero) | (*e1 > zero) | (*e2 > zero));
+    *det = u + *e1 + *e2;
+    *t_scaled = (u * az + *e1 * bz + *e2 * cz) * sh->sz;
+    /* compare before dividing, with the sign of det folded in; det == 0 (degenerate) never hits */
+    floatL t_det = tmax * *det;
+    intL in_range = select((*t_scaled > zero) & (*t_scaled < t_det), (*t_scaled < zero) & (*t_scaled > t_det),
+                           *det < zero);
+    return ~outside & (*det != zero) & in_range;
+}
+
+/* The triangles of a packet: 0 when none is hit in (0, tmax); 1 after writing the nearest hit to
+ * *hit (ties go to the lower lane, as to the primitive tested first one by one); 2 when the query
+ * can stop: TRACE_ANY on any hit, TRACE_SHADOW on a hit of an opaque lane (*hit: that lane). */
+__attribute__((always_inline))
+inline int packet_triangles_intersect(__global const LeafPacket *pk, const Shear *sh, float tmax, int mode,
+                                      Hit *hit) {
+    floatL t_scaled, det, e1, e2;
+    intL ok = packet_triangles_hit(pk, sh, tmax, &t_scaled, &det, &e1, &e2);
+    if (!any(ok)) return 0;
+    if (mode == TRACE_ANY) return 2;    /* an occlusion test needs no distance */
+    int stop = 0;
+    if (mode == TRACE_SHADOW) {
+        intL opaque = ok & vloadL(0, pk->opaque);
+        if (any(opaque)) {
+            ok = opaque;
+            stop = 2;
+        }
+    }
+    floatL inv = 1.0f / det;
+    float t[VOLCL_LEAF_WIDTH], b1[VOLCL_LEAF_WIDTH], b2[VOLCL_LEAF_WIDTH];
+    vstoreL(select((floatL)(VOLCL_INF), t_scaled * inv, ok), 0, t);
+    vstoreL(e1 * inv, 0, b1);
+    vstoreL(e2 * inv, 0, b2);
+    int best = 0;
+    for (int i = 1; i < VOLCL_LEAF_WIDTH; ++i)
+        if (t[i] < t[best]) best = i;
+    hit->t = t[best];
+    hit->prim = pk->prim[best];
+    hit->b1 = b1[best];
+    hit->b2 = b2[best];
+    return stop ? stop : 1;
 }
 
 /* Nearest root of |o + t d - c| = r in (0, tmax). The discriminant is formed from the distance of
@@ -98,87 +173,173 @@ inline bool sphere_intersect(__global const Sphere *sp, float3 o, float3 d, floa
     return true;
 }
 
-/* Entry distance of the ray into a node's box, or INF when it misses within [0, tmax]. The exit
- * distance is widened by a few ulps so rounding never culls a box the ray grazes. inv_d is finite
- * (see bvh_trace), so no slab product is NaN and plain compares can replace fmin/fmax, whose NaN
- * rules cost extra instructions on every node. */
-__attribute__((always_inline))
-inline float node_entry(__global const BvhNode *n, float3 o, float3 inv_d, float tmax) {
-    float3 t0 = (vload_f3(n->bmin) - o) * inv_d;
-    float3 t1 = (vload_f3(n->bmax) - o) * inv_d;
-    float3 lo = select(t1, t0, t0 < t1), hi = select(t0, t1, t0 < t1);
-    float enter = lo.x > lo.y ? lo.x : lo.y;
-    enter = enter > lo.z ? enter : lo.z;
-    enter = enter > 0.0f ? enter : 0.0f;
-    float leave = hi.x < hi.y ? hi.x : hi.y;
-    leave = leave < hi.z ? leave : hi.z;
-    leave = (leave < tmax ? leave : tmax) * 1.0000004f;
-    return enter <= leave ? enter : VOLCL_INF;
-}
-
-__attribute__((always_inline))
-inline bool prim_intersect(const SceneData *sc, int code, float3 o, float3 d, const Shear *sh, float tmax,
-                           Hit *hit) {
-    float t, b1 = 0.0f, b2 = 0.0f;
+/* The analytic primitives of a packet (codes < 0: spheres and cylinders, cylinder.h), one by one
+ * after its triangles; returns as packet_triangles_intersect does. */
+inline int packet_analytic_intersect(const SceneData *sc, __global const LeafPacket *pk, float3 o, float3 d,
+                                     int mode, Hit *hit) {
+    int found = 0;
 #if VOLCL_HAS_SPHERES || VOLCL_HAS_CYLINDERS
-    if (code < 0) {
+    for (int i = 0; i < VOLCL_LEAF_WIDTH; ++i) {
+        int code = pk->prim[i];
+        if (code >= 0) continue;
         int a = -code - 1;
+        float t;
+        bool h;
 #if VOLCL_HAS_CYLINDERS
-        if (analytic_is_cylinder(a)) {
-            if (!cylinder_intersect(&sc->cylinders[a - VOLCL_CYLINDER_CODE_BASE], o, d, tmax, &t)) return false;
-        } else
+        if (analytic_is_cylinder(a))
+            h = cylinder_intersect(&sc->cylinders[a - VOLCL_CYLINDER_CODE_BASE], o, d, hit->t, &t);
+        else
 #endif
-        if (!sphere_intersect(&sc->spheres[a], o, d, tmax, &t)) return false;
-    } else
+            h = sphere_intersect(&sc->spheres[a], o, d, hit->t, &t);
+        if (h) {
+            hit->t = t;
+            hit->prim = code;
+            hit->b1 = hit->b2 = 0.0f;
+            if (mode == TRACE_ANY || (mode == TRACE_SHADOW && pk->opaque[i])) return 2;
+            found = 1;
+        }
+    }
 #endif
-    if (!triangle_intersect(&sc->triangles[code], sh, tmax, &t, &b1, &b2)) return false;
-    hit->t = t;
-    hit->prim = code;
-    hit->b1 = b1;
-    hit->b2 = b2;
-    return true;
+    return found;
 }
 
-/* Closest hit in (0, tmax). any_hit: return at the first hit found (shadow rays). An empty scene is
- * uploaded as one leaf with an inverted box, which no ray enters. */
-inline bool bvh_trace(const SceneData *sc, float3 o, float3 d, float tmax, bool any_hit, Hit *hit) {
+/* Per-ray constants of the box tests: origin and reciprocal direction splatted over the child
+ * lanes, and for each axis the bounds row (offset in floats) of the slab plane a ray meets first. */
+typedef struct {
+    floatW ox, oy, oz, ix, iy, iz;
+    int near_x, near_y, near_z;
+} BoxRay;
+
+inline BoxRay box_ray_make(float3 o, float3 inv_d) {
+    BoxRay r;
+    r.ox = (floatW)(o.x);
+    r.oy = (floatW)(o.y);
+    r.oz = (floatW)(o.z);
+    r.ix = (floatW)(inv_d.x);
+    r.iy = (floatW)(inv_d.y);
+    r.iz = (floatW)(inv_d.z);
+    /* rows 0-2 hold the minima, 3-5 the maxima: a negative direction meets the maximum first */
+    r.near_x = (inv_d.x < 0.0f ? 3 : 0) * VOLCL_BVH_WIDTH;
+    r.near_y = (inv_d.y < 0.0f ? 4 : 1) * VOLCL_BVH_WIDTH;
+    r.near_z = (inv_d.z < 0.0f ? 5 : 2) * VOLCL_BVH_WIDTH;
+    return r;
+}
+
+/* Entry distances of the ray into the boxes of all children of node n, INF where it misses a box
+ * within [0, tmax]. The slab distances are (bound - o) * inv_d, so the exit distance is exact up to
+ * one rounding and widening it by a few ulps means rounding never culls a box the ray grazes.
+ * inv_d is finite (see bvh_trace), so no product is NaN and plain compares replace fmin/fmax, whose
+ * NaN rules cost extra instructions on every node; the inverted boxes of unused slots give
+ * enter = +inf > leave = -inf. */
+__attribute__((always_inline))
+inline floatW node_children_entry(__global const BvhWideNode *n, const BoxRay *r, float tmax) {
+    __global const float *b = &n->bounds[0][0];
+    floatW nx = (vloadW(0, b + r->near_x) - r->ox) * r->ix;
+    floatW ny = (vloadW(0, b + r->near_y) - r->oy) * r->iy;
+    floatW nz = (vloadW(0, b + r->near_z) - r->oz) * r->iz;
+    floatW fx = (vloadW(0, b + (3 * VOLCL_BVH_WIDTH - r->near_x)) - r->ox) * r->ix;
+    floatW fy = (vloadW(0, b + (5 * VOLCL_BVH_WIDTH - r->near_y)) - r->oy) * r->iy;
+    floatW fz = (vloadW(0, b + (7 * VOLCL_BVH_WIDTH - r->near_z)) - r->oz) * r->iz;
+    floatW enter = select(ny, nx, nx > ny);
+    enter = select(nz, enter, enter > nz);
+    enter = select((floatW)(0.0f), enter, enter > (floatW)(0.0f));
+    floatW leave = select(fy, fx, fx < fy);
+    leave = select(fz, leave, leave < fz);
+    leave = select((floatW)(tmax), leave, leave < (floatW)(tmax)) * 1.0000004f;
+    return select((floatW)(VOLCL_INF), enter, enter <= leave);
+}
+
+/* Bit i set where lane i of m is true (-1). */
+inline int lane_mask(intW m) {
+#if VOLCL_BVH_WIDTH == 8
+    int8 bits = m & (int8)(1, 2, 4, 8, 16, 32, 64, 128);
+    int4 b4 = bits.lo | bits.hi;
+#else
+    int4 b4 = m & (int4)(1, 2, 4, 8);
+#endif
+    int2 b2 = b4.lo | b4.hi;
+    return b2.x | b2.y;
+}
+
+/* Index of the lowest set bit of a non-zero mask (OpenCL C 1.2 has clz but not ctz). */
+inline int lowest_lane(int mask) { return 31 - clz(mask & -mask); }
+
+/* A query (TRACE_*) for hits in (0, tmax); true when something is hit, with *hit as the mode says.
+ *
+ * The traversal keeps a stack of (child, entry distance). At a node every child box the ray enters
+ * goes on the stack; for closest hits they are inserted in order of entry distance, nearest on top,
+ * so the nearest is visited next and a hit found there culls the others when they come off the
+ * stack (an entry distance beyond the hit, with the box test's tolerance). Occlusion tests
+ * (TRACE_ANY) skip the ordering; the shadow query keeps it, for the nearest null surface. The builder bounds the stack depth any ray can reach by VOLCL_BVH_STACK
+ * (volcl/bvh_wide.py). An empty scene is one node without children, which no ray enters. */
+inline bool bvh_trace(const SceneData *sc, float3 o, float3 d, float tmax, int mode, Hit *hit) {
     Shear sh = shear_make(o, d);
     /* a zero direction component becomes a tiny one of the same sign: its slab then spans
      * +-1e30 instead of producing 0 * INF = NaN for an origin on the slab plane */
     float3 inv_d = 1.0f / select(d, copysign((float3)(1e-30f), d), fabs(d) < (float3)(1e-30f));
+    BoxRay br = box_ray_make(o, inv_d);
     int stack[VOLCL_BVH_STACK];
+    float stack_t[VOLCL_BVH_STACK];
     int top = 0;
-    int node = 0;
+    int ref = 0;            /* the node or leaf visited now: the root first */
     bool found = false;
     hit->t = tmax;
-    if (node_entry(&sc->nodes[0], o, inv_d, tmax) == VOLCL_INF) return false;
+    hit->prim = 0;
+    hit->b1 = hit->b2 = 0.0f;
     for (;;) {
-        __global const BvhNode *n = &sc->nodes[node];
-        if (n->count > 0) {
-            for (int i = n->index; i < n->index + n->count; ++i) {
-                if (prim_intersect(sc, sc->prim_ids[i], o, d, &sh, hit->t, hit)) {
-                    found = true;
-                    if (any_hit) return true;
+        if (ref >= 0) {
+            __global const BvhWideNode *n = &sc->nodes[ref];
+            floatW entry = node_children_entry(n, &br, hit->t);
+            int mask = lane_mask(entry < (floatW)(VOLCL_INF));
+            if (mask != 0) {
+                int i = lowest_lane(mask);
+                mask &= mask - 1;
+                if (mask == 0) {        /* one child entered: visit it without the stack */
+                    ref = n->child[i];
+                    continue;
                 }
-            }
-        } else {
-            int left = node + 1, right = n->index;
-            float tl = node_entry(&sc->nodes[left], o, inv_d, hit->t);
-            float tr = node_entry(&sc->nodes[right], o, inv_d, hit->t);
-            if (tl != VOLCL_INF || tr != VOLCL_INF) {
-                if (tl == VOLCL_INF) { node = right; continue; }
-                if (tr == VOLCL_INF) { node = left; continue; }
-                /* visit the nearer child first; the farther waits on the stack */
-                if (tr < tl) { int tmp = left; left = right; right = tmp; }
-                stack[top++] = right;
-                node = left;
+                float enter[VOLCL_BVH_WIDTH];
+                vstoreW(entry, 0, enter);
+                /* every entered child on the stack; for closest hits each goes into this node's run
+                 * of the stack in order of entry distance, farthest at the bottom */
+                int base = top;
+                for (;;) {
+                    float t = enter[i];
+                    int j = top++;
+                    if (mode != TRACE_ANY) {
+                        for (; j > base && stack_t[j - 1] < t; --j) {
+                            stack[j] = stack[j - 1];
+                            stack_t[j] = stack_t[j - 1];
+                        }
+                    }
+                    stack[j] = n->child[i];
+                    stack_t[j] = t;
+                    if (mask == 0) break;
+                    i = lowest_lane(mask);
+                    mask &= mask - 1;
+                }
+                ref = stack[--top];     /* the nearest, which just passed the box test */
                 continue;
             }
+        } else {
+            int leaf = ~ref;
+            int first = leaf >> 4, end = first + (leaf & 15) + 1;
+            for (int i = first; i < end; ++i) {
+                __global const LeafPacket *pk = &sc->leaves[i];
+                int h = packet_triangles_intersect(pk, &sh, hit->t, mode, hit);
+                if (h == 2) return true;
+                int ha = packet_analytic_intersect(sc, pk, o, d, mode, hit);
+                if (ha == 2) return true;
+                found |= (h | ha) != 0;
+            }
         }
-        if (top == 0) break;
-        node = stack[--top];
+        /* next from the stack, skipping entries whose box the ray enters beyond the closest hit */
+        do {
+            if (top == 0) return found;
+            --top;
+        } while (stack_t[top] > hit->t * 1.0000004f);
+        ref = stack[top];
     }
-    return found;
 }
 
 #endif

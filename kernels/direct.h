@@ -38,7 +38,7 @@ inline float3 direct_emission(const SceneData *sc, bool hit, const Hit *h, float
 inline float3 direct_radiance(const SceneData *sc, Rng *rng, float3 o, float3 d, float t_max) {
     __global const RenderParams *rp = sc->params;
     Hit h;
-    bool hit = bvh_trace(sc, o, d, t_max, false, &h);
+    bool hit = bvh_trace(sc, o, d, t_max, TRACE_CLOSEST, &h);
     /* hide_emitters: pass through area emitters (bounded like shadow rays' boundary crossings) */
     for (int i = 0; hit && rp->hide_emitters && i < VOLCL_MAX_CROSSINGS; ++i) {
         SurfacePoint s = surface_point(sc, &h, o, d);
@@ -46,7 +46,7 @@ inline float3 direct_radiance(const SceneData *sc, Rng *rng, float3 o, float3 d,
         float3 next = offset_origin(s.p, s.mag, s.ng, d);
         if (t_max < INFINITY) t_max = fmax(t_max - dot(next - o, d), 0.0f);
         o = next;
-        hit = bvh_trace(sc, o, d, t_max, false, &h);
+        hit = bvh_trace(sc, o, d, t_max, TRACE_CLOSEST, &h);
     }
     float3 L = (float3)(0.0f);
     if (!rp->hide_emitters) {
@@ -71,7 +71,7 @@ inline float3 direct_radiance(const SceneData *sc, Rng *rng, float3 o, float3 d,
             /* Mitsuba's direct integrator tests visibility: every surface blocks, masks included */
             float t = ls.dist < INFINITY ? ls.dist * 0.9999f : INFINITY;
             Hit blocker;
-            if (bvh_trace(sc, offset_origin(s.p, s.mag, s.ng, ls.wi), ls.wi, t, true, &blocker)) continue;
+            if (bvh_trace(sc, offset_origin(s.p, s.mag, s.ng, ls.wi), ls.wi, t, TRACE_ANY, &blocker)) continue;
             float w = ls.delta ? 1.0f : power_heuristic(ls.pdf * frac_e, pdf_b * frac_b) / n_e;
             L += f * ls.value * (w / ls.pdf);
         }
@@ -83,7 +83,7 @@ inline float3 direct_radiance(const SceneData *sc, Rng *rng, float3 o, float3 d,
         float3 wi = bs.wi;
         float3 origin = offset_origin(s.p, s.mag, s.ng, wi);
         Hit h2;
-        bool hit2 = bvh_trace(sc, origin, wi, INFINITY, false, &h2);
+        bool hit2 = bvh_trace(sc, origin, wi, INFINITY, TRACE_CLOSEST, &h2);
         float pdf_l;
         float3 le = direct_emission(sc, hit2, &h2, origin, wi, s.p, &pdf_l);
         if (!(max_component(le) > 0.0f)) continue;

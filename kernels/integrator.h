@@ -48,7 +48,7 @@ inline int camera_start_medium(const SceneData *sc, float3 *o, float3 d, float *
     float reach = dot(*o - p, d);
     for (int i = 0; i < VOLCL_MAX_CROSSINGS && reach > 0.0f; ++i) {
         Hit h;
-        if (!bvh_trace(sc, p, d, reach, false, &h)) break;
+        if (!bvh_trace(sc, p, d, reach, TRACE_CLOSEST, &h)) break;
         SurfacePoint s = surface_point(sc, &h, p, d);
         medium = medium_after(sc, &s, d, medium);
         float3 next = offset_origin(s.p, s.mag, s.ng, d);
@@ -74,16 +74,23 @@ inline float3 shadow_transmittance(const SceneData *sc, float3 o, float3 w, floa
     float t_back = 0.0f;    /* from the boundary just crossed to the offset origin: see integrator_radiance */
     for (int i = 0; i < VOLCL_MAX_CROSSINGS; ++i) {
         Hit h;
-        bool hit = bvh_trace(sc, o, w, t_max, false, &h);
+        bool hit = bvh_trace(sc, o, w, t_max, TRACE_SHADOW, &h);
+        SurfacePoint s;
+        float3 passed = (float3)(1.0f);
+        if (hit) {
+            /* an opaque surface anywhere on the segment blocks it: the query stops at the first one
+             * it finds, before any medium on the way is estimated. Null surfaces pass everything,
+             * masks and panes a part (bsdf_vertex.h); the leaf packets mark none of them opaque
+             * (volcl.pack), so the hit is then the nearest on the segment. */
+            s = surface_point(sc, &h, o, w);
+            passed = surface_null_transmission(sc, &h, &s, w);
+            if (!(max_component(passed) > 0.0f)) return (float3)(0.0f);
+        }
         float seg = (hit ? h.t : t_max) + t_back;
 #if VOLCL_HAS_MEDIA
         if (medium >= 0) tr = medium_attenuate(sc, &sc->media[medium], o - t_back * w, w, seg, tr, rng, cutoffs);
 #endif
         if (!hit) return tr;
-        SurfacePoint s = surface_point(sc, &h, o, w);
-        /* null surfaces pass everything, masks and panes a part (bsdf_vertex.h), others nothing */
-        float3 passed = surface_null_transmission(sc, &h, &s, w);
-        if (!(max_component(passed) > 0.0f)) return (float3)(0.0f);
         tr *= passed;
         if (max_component(tr) <= 0.0f) return tr;
         medium = medium_after(sc, &s, w, medium);
@@ -96,7 +103,7 @@ inline float3 shadow_transmittance(const SceneData *sc, float3 o, float3 w, floa
     return (float3)(0.0f);
 #else
     Hit h;
-    return bvh_trace(sc, o, w, t_max, true, &h) ? (float3)(0.0f) : (float3)(1.0f);
+    return bvh_trace(sc, o, w, t_max, TRACE_ANY, &h) ? (float3)(0.0f) : (float3)(1.0f);
 #endif
 }
 
@@ -483,7 +490,7 @@ inline float3 integrator_radiance(const SceneData *sc, Rng *rng, float3 o, float
 
     for (int step = 0; step < VOLCL_MAX_STEPS; ++step) {
         Hit h;
-        bool hit = bvh_trace(sc, ps.o, ps.d, ps.t_max, false, &h);
+        bool hit = bvh_trace(sc, ps.o, ps.d, ps.t_max, TRACE_CLOSEST, &h);
         int next = path_medium_event(sc, rng, &ps, hit, &h, cutoffs);
         if (next == PATH_SURFACE) next = path_surface_event(sc, rng, &ps, hit, &h, cutoffs);
         if (next == PATH_END) break;

@@ -15,7 +15,13 @@
 inline float3 transmittance_exp(float3 sigma, float t) {
     float3 tau = sigma * t;
     tau = select(tau, (float3)(0.0f), sigma == (float3)(0.0f));
+#if VOLCL_HAS_CHROMATIC_MEDIA
     return exp(-tau);
+#else
+    /* grey extinction (every sigma passed here is a medium's sigma_t, equal in all channels):
+     * one exponential instead of three, the same value in each channel */
+    return (float3)(exp(-tau.x));
+#endif
 }
 
 typedef struct {

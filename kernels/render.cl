@@ -28,7 +28,7 @@
 #include "integrator.h"
 #include "direct.h"
 
-VOLCL_KERNEL void render_pass(__global const BvhNode *nodes, __global const int *prim_ids,
+VOLCL_KERNEL void render_pass(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
                           __global const Triangle *triangles, __global const TriangleNormals *normals,
                           __global const Sphere *spheres, __global const Cylinder *cylinders,
                           __global const ShapeInfo *shapes,
@@ -51,7 +51,7 @@ VOLCL_KERNEL void render_pass(__global const BvhNode *nodes, __global const int 
     int tp = first + gid % count;    /* the pixel's index in the tile */
     int px = tile_x + tp % tile_w, py = tile_y + tp / tile_w;
     int pixel = py * params->width + px;
-    SceneData sc = {nodes, prim_ids, triangles, normals, spheres, cylinders, shapes, bsdfs, lights,
+    SceneData sc = {nodes, leaves, triangles, normals, spheres, cylinders, shapes, bsdfs, lights,
                     light_tri_cdf, light_tris, env_data, media, grids, grid_data, params, tri_uvs, uv_maps,
                     textures, texels, bsdf_tables, phase_lobes, phase_tables};
     Rng rng = rng_init(params->seed, (uint)pixel, sample_base + (uint)slot);

@@ -3,8 +3,8 @@
 #define VOLCL_SCENE_H
 
 typedef struct {
-    __global const BvhNode *nodes;
-    __global const int *prim_ids;       /* >= 0: triangle index; < 0: analytic index -(id + 1) (cylinder.h) */
+    __global const BvhWideNode *nodes;
+    __global const LeafPacket *leaves;  /* the BVH leaves' primitives, in packets */
     __global const Triangle *triangles;
     __global const TriangleNormals *normals;
     __global const Sphere *spheres;

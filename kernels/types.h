@@ -7,14 +7,29 @@
 #ifndef VOLCL_TYPES_H
 #define VOLCL_TYPES_H
 
-/* Flattened BVH node in depth-first order. Interior (count == 0): the left child is the next node and
- * `index` is the right child. Leaf (count > 0): primitive slots [index, index + count) of prim_ids. */
+/* Wide BVH node (volcl/bvh_wide.py): the boxes of up to VOLCL_BVH_WIDTH children as six rows
+ * (min x, y, z, then max x, y, z) of one float per child, so one vector load reads a slab plane of
+ * every child. child[i] >= 0: a node index; < 0: a leaf, ~child[i] = (first << 4) | (count - 1)
+ * over the leaf packets [first, first + count). Unused slots have an inverted box (min +inf,
+ * max -inf), which no ray enters. The root is node 0. */
+#define VOLCL_BVH_WIDTH 8
 typedef struct {
-    float bmin[3];
-    int index;
-    float bmax[3];
-    int count;
-} BvhNode;
+    float bounds[6][VOLCL_BVH_WIDTH];
+    int child[VOLCL_BVH_WIDTH];
+} BvhWideNode;
+
+/* Up to VOLCL_LEAF_WIDTH primitives of a BVH leaf, tested together: the triangles' vertex
+ * coordinates as nine rows (p0 x, y, z, p1 x, y, z, p2 x, y, z) of one float per primitive, each
+ * primitive's code (>= 0: index into the Triangle array; < 0: sphere -(code + 1)), and -1 where
+ * the primitive's surface is opaque (its bsdf is not null; shadow rays stop there), else 0. Lanes
+ * of spheres and unused lanes hold a zero triangle, which no ray hits (its det is exactly 0);
+ * unused lanes have code 0. */
+#define VOLCL_LEAF_WIDTH 4
+typedef struct {
+    float v[9][VOLCL_LEAF_WIDTH];
+    int prim[VOLCL_LEAF_WIDTH];
+    int opaque[VOLCL_LEAF_WIDTH];
+} LeafPacket;
 
 /* A triangle as its three vertices: the watertight test needs the exact shared vertices (a vertex
  * rebuilt as p0 + edge rounds differently in each triangle that shares it, and rays leak between). */

@@ -219,7 +219,7 @@ def test_update_uploads_only_the_arrays_that_changed(device):
     params["floor.to_world"] = FLOOR @ tf.translate([0.0, 0.0, 0.01])
     moved = params.update()
     # the BVH and the triangles move; the scene's bounds (in RenderParams) may, too
-    assert {"nodes", "triangles"} <= set(moved.arrays) <= {"nodes", "prim_ids", "triangles", "params"}
+    assert {"nodes", "triangles"} <= set(moved.arrays) <= {"nodes", "leaves", "triangles", "params"}
     params["cam.to_world"] = CAMERA
     assert params.update().arrays in ([], ["params"])      # RenderParams: each render uploads its own
     params["glass.int_ior"] = 1.33                         # the value it already has

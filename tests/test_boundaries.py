@@ -6,7 +6,7 @@ import trimesh
 
 from conftest import run_kernel
 from volcl import layout
-from volcl.bvh import build_bvh
+from volcl.bvh_wide import device_bvh
 
 pytestmark = pytest.mark.every_implementation
 
@@ -26,11 +26,11 @@ def test_walks_inside_closed_mesh_never_leak(cl_env, test_program, mesh, scale):
     t = np.zeros(len(tris), layout.TRIANGLE)
     t["p0"], t["p1"], t["p2"] = tris[:, 0], tris[:, 1], tris[:, 2]
     t["normals"] = -1
-    nodes, order = build_bvh(tris.min(1), tris.max(1))
+    nodes, leaves = device_bvh(np.arange(len(tris)), tris.min(1), tris.max(1), tris)
     n = 16384
     starts = np.repeat((np.array([3.0, -2.0, 1.0]) * scale)[None], n, 0).astype(np.float32)
     leaks, hits = run_kernel(cl_env, test_program("leak_tests.cl"), "walk_inside", n,
                              [(np.int32, ()), (np.int32, ())], np.int32(64),
-                             inputs=[nodes, order.astype(np.int32), t, starts])
+                             inputs=[nodes, leaves, t, starts])
     assert hits.sum() > n * 32, "walks should bounce many times"
     assert leaks.sum() == 0, f"{leaks.sum()} of {n} walks leaked out of the closed mesh"

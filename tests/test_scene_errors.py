@@ -410,7 +410,7 @@ def _mesh_scene(tmp_path, mesh_name: str, mesh_text: str, kind: str = "obj") -> 
     ("empty.obj", "# nothing\n", "obj", "empty"),
     ("nan.obj", "v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "obj", "non-finite"),
     ("bad.ply", "not a ply file\n", "ply", "cannot parse PLY"),
-    ("index.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n", "obj", "cannot parse OBJ"),
+    ("index.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n", "obj", "index missing vertices"),
 ])
 def test_bad_mesh_files(tmp_path, mesh_name, text, kind, fragment):
     message = expect_error(tmp_path, _mesh_scene(tmp_path, mesh_name, text, kind), 3, fragment)

@@ -120,3 +120,64 @@ def test_primitives_follow_to_world(tmp_path):
             '</transform></shape>')
     (shape,) = scene(tmp_path, body).shapes
     assert np.allclose(geometric_normals(shape), [0, -1, 0])   # +z rotated 90 about x
+
+
+OBJ_CASES = {
+    # triangles, a quad and a pentagon in between, in file order
+    "polygons.obj": "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 2 0\n"
+                    "f 1 2 3\nf 1 2 3 4\nf 2 3 4\nf 1 3 4 5 2\nf 3 4 5\n",
+    # normals per corner, negative (relative) indices; texture coordinates on some corners only
+    "normals.obj": "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\nvn 0 0 -1\n"
+                   "f 1/1/1 2/1/2 3/1/1\nf -4//-2 -2//-1 -1//-2\n",
+    # texture coordinates on every corner: a shared position with two coordinates splits
+    "uvs.obj": "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0.25 0.5\n"
+               "f 1/1 2/2 3/3\nf 1/4 3/3 4/2\n",
+    # objects and smoothing groups change nothing; a shared position with two normals splits
+    "groups.obj": "o a\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nvn 1 0 0\ns 1\nf 1//1 2//1 3//1\n"
+                  "o b\nv 0 0 1\nf 1//2 2//2 4//2\n",
+}
+
+
+@pytest.mark.parametrize("name", sorted(OBJ_CASES))
+def test_obj_reader_matches_trimesh_corner_for_corner(tmp_path, name):
+    """volcl reads OBJ files itself (trimesh's import is slow); without material groups its result
+    is trimesh's, triangle by triangle: positions, normals and texture coordinates of every corner,
+    in the same order."""
+    from trimesh.exchange.obj import load_obj
+    path = tmp_path / name
+    path.write_text(OBJ_CASES[name])
+    ours = mesh.load_mesh(str(path))
+    with open(path, "rb") as fh:
+        parts = list(load_obj(fh, skip_materials=True)["geometry"].values())
+    ref = mesh._concatenate(parts)
+    np.testing.assert_array_equal(ours.vertices[ours.faces], ref.vertices[ref.faces])
+    assert (ours.normals is None) == (ref.normals is None)
+    if ours.normals is not None:
+        np.testing.assert_array_equal(ours.normals[ours.faces], ref.normals[ref.faces] /
+                                      np.linalg.norm(ref.normals[ref.faces], axis=-1, keepdims=True))
+    assert (ours.uvs is None) == (ref.uvs is None)
+    if ours.uvs is not None:
+        np.testing.assert_array_equal(ours.uvs[ours.faces], ref.uvs[ref.faces])
+
+
+@needs_nori
+def test_obj_reader_keeps_file_order_across_material_groups():
+    """The Nori walls: three objects with their own materials; faces stay in file order (trimesh
+    regroups them by material), as Mitsuba reads them."""
+    m = mesh.load_mesh(str(NORI / "cbox" / "meshes" / "walls.obj"))
+    corners = m.vertices[m.faces]
+    assert len(corners) == 6
+    np.testing.assert_allclose(corners[0], [[1.0, 1.59, -1.04], [1.0, 1.59, 0.99], [-1.02, 1.59, 0.99]])
+    assert np.all(corners[2:4, :, 1] == 0.0) and np.all(corners[4:, :, 2] == -1.04)
+
+
+def test_closure_check_without_trimesh():
+    """Closed and consistently wound, open, non-manifold and inconsistently wound surfaces."""
+    cube = mesh.cube()
+    assert mesh.closure_problem(cube.vertices, cube.faces) is None
+    assert "not closed" in mesh.closure_problem(cube.vertices, cube.faces[:-1])
+    flipped = cube.faces.copy()
+    flipped[0] = flipped[0, ::-1]
+    assert "not wound consistently" in mesh.closure_problem(cube.vertices, flipped)
+    fin = np.vstack([cube.faces, [[0, 1, 7]], [[0, 7, 1]]])
+    assert "more than two" in mesh.closure_problem(cube.vertices, fin)

@@ -185,7 +185,7 @@ def surface_uvs(cl_env, prog, scene, o, d):
     o = np.ascontiguousarray(np.broadcast_to(o, d.shape), np.float32)
     d = np.ascontiguousarray(d, np.float32)
     return run_kernel(cl_env, prog, "surface_uvs", len(d), [(f32, (2,)), (f32, (3,)), (f32, (3,)), (np.int32, ())],
-                      inputs=[a[k] for k in ("nodes", "prim_ids", "triangles", "normals", "spheres", "cylinders",
+                      inputs=[a[k] for k in ("nodes", "leaves", "triangles", "normals", "spheres", "cylinders",
                                              "shapes", "tri_uvs", "uv_maps")] + [o, d])
 
 

@@ -5,7 +5,7 @@ import pytest
 
 from conftest import run_kernel
 from volcl import layout
-from volcl.bvh import build_bvh
+from volcl.bvh_wide import device_bvh
 
 pytestmark = pytest.mark.every_implementation
 
@@ -22,7 +22,7 @@ def random_scene(rng, n_tri=3000, n_sph=40):
     return tris, sph_c, sph_r
 
 
-def upload_arrays(tris, sph_c, sph_r):
+def upload_arrays(tris, sph_c, sph_r, opaque=None):
     t = np.zeros(len(tris), layout.TRIANGLE)
     t["p0"], t["p1"], t["p2"] = tris[:, 0], tris[:, 1], tris[:, 2]
     t["normals"] = -1
@@ -31,8 +31,8 @@ def upload_arrays(tris, sph_c, sph_r):
     lo = np.concatenate([tris.min(1), sph_c - sph_r[:, None]])
     hi = np.concatenate([tris.max(1), sph_c + sph_r[:, None]])
     codes = np.concatenate([np.arange(len(tris)), -1 - np.arange(len(sph_c))]).astype(np.int32)
-    nodes, order = build_bvh(lo, hi)
-    return nodes, codes[order], t, s
+    nodes, leaves = device_bvh(codes, lo, hi, tris, opaque)
+    return nodes, leaves, t, s
 
 
 def brute_force(tris, sph_c, sph_r, o, d):
@@ -65,14 +65,20 @@ def brute_force(tris, sph_c, sph_r, o, d):
     near_edge = np.where(ok, np.abs(margin), np.inf).min(1) < 1e-4
     # rays that graze an edge of some triangle within tolerance, hit or not
     grazing = (np.abs(det) > 1e-14) & (margin > -1e-4) & (margin < 1e-4) & (t > 0)
-    return t_all[np.arange(len(o)), best], best, near_edge | grazing.any(1)
+    return t_all[np.arange(len(o)), best], best, near_edge | grazing.any(1), t_all
+
+
+OUTPUTS = [(np.float32, ()), (np.int32, ()), (np.int32, ()), (np.int32, ())]
+NO_HIT = 0x7fffffff
 
 
 @pytest.mark.parametrize("seed", [1, 2])
 def test_device_traversal_matches_brute_force(cl_env, test_program, seed):
     rng = np.random.default_rng(seed)
     tris, sph_c, sph_r = random_scene(rng)
-    nodes, prim_ids, t_arr, s_arr = upload_arrays(tris, sph_c, sph_r)
+    # half the primitives null surfaces, for the shadow query
+    opaque = rng.random(len(tris) + len(sph_c)) < 0.5
+    nodes, leaves, t_arr, s_arr = upload_arrays(tris, sph_c, sph_r, opaque)
     n = 2000
     o = rng.uniform(-1.5, 1.5, (n, 3))
     d = rng.normal(size=(n, 3))
@@ -82,11 +88,11 @@ def test_device_traversal_matches_brute_force(cl_env, test_program, seed):
     d[: n // 4] = 0
     d[np.arange(n // 4), axis] = rng.choice([-1.0, 1.0], n // 4)
     prog = test_program("traversal_tests.cl")
-    t_dev, prim_dev, occ = run_kernel(
-        cl_env, prog, "trace_rays", n, [(np.float32, ()), (np.int32, ()), (np.int32, ())],
-        inputs=[nodes, prim_ids, t_arr, s_arr, o.astype(np.float32), d.astype(np.float32)])
-    t_ref, _, ambiguous = brute_force(tris, sph_c, sph_r, o.astype(np.float32).astype(np.float64),
-                                      d.astype(np.float32).astype(np.float64))
+    t_dev, prim_dev, occ, shadow = run_kernel(
+        cl_env, prog, "trace_rays", n, OUTPUTS,
+        inputs=[nodes, leaves, t_arr, s_arr, o.astype(np.float32), d.astype(np.float32)])
+    t_ref, _, ambiguous, t_all = brute_force(tris, sph_c, sph_r, o.astype(np.float32).astype(np.float64),
+                                             d.astype(np.float32).astype(np.float64))
     hit_ref = np.isfinite(t_ref)
     hit_dev = np.isfinite(t_dev)
     assert hit_ref.sum() > n // 4, "the test scene should be hit by many rays"
@@ -99,6 +105,17 @@ def test_device_traversal_matches_brute_force(cl_env, test_program, seed):
     assert not bad.any(), f"{bad.sum()} rays with wrong distance, worst relative error {rel.max():.3g}"
     # any-hit agrees with closest-hit
     assert np.array_equal(occ.astype(bool), hit_dev)
+    # shadow query: the closest hit when that is a null surface, else some opaque primitive hit
+    column = np.where(shadow >= 0, shadow, len(tris) - 1 - shadow)     # primitive codes to columns
+    got = shadow != NO_HIT
+    got_opaque = got & opaque[np.where(got, column, 0)]
+    assert np.array_equal(got, hit_dev)
+    assert np.isfinite(t_all[np.flatnonzero(got_opaque), column[got_opaque]]).all()
+    unblocked = got & ~got_opaque
+    assert np.array_equal(shadow[unblocked], prim_dev[unblocked])
+    nearest_opaque = hit_dev & opaque[np.where(prim_dev >= 0, prim_dev, len(tris) - 1 - prim_dev) * hit_dev]
+    assert got_opaque[nearest_opaque].all()
+    assert got_opaque.sum() > n // 10 and unblocked.sum() > n // 20, "both outcomes should occur"
 
 
 def test_closed_mesh_does_not_leak_through_shared_edges(cl_env, test_program):
@@ -107,7 +124,7 @@ def test_closed_mesh_does_not_leak_through_shared_edges(cl_env, test_program):
     box = trimesh.creation.box(extents=(2, 2, 2))
     box = box.subdivide().subdivide()
     tris = np.asarray(box.vertices)[np.asarray(box.faces)]
-    nodes, prim_ids, t_arr, s_arr = upload_arrays(tris, np.zeros((0, 3)), np.zeros(0))
+    nodes, leaves, t_arr, s_arr = upload_arrays(tris, np.zeros((0, 3)), np.zeros(0))
     edges = np.asarray(box.edges_unique)
     v = np.asarray(box.vertices)
     rng = np.random.default_rng(3)
@@ -116,6 +133,6 @@ def test_closed_mesh_does_not_leak_through_shared_edges(cl_env, test_program):
     d = targets - o
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     prog = test_program("traversal_tests.cl")
-    t_dev, _, _ = run_kernel(cl_env, prog, "trace_rays", len(o), [(np.float32, ()), (np.int32, ()), (np.int32, ())],
-                             inputs=[nodes, prim_ids, t_arr, s_arr, o.astype(np.float32), d.astype(np.float32)])
+    t_dev, _, _, _ = run_kernel(cl_env, prog, "trace_rays", len(o), OUTPUTS,
+                             inputs=[nodes, leaves, t_arr, s_arr, o.astype(np.float32), d.astype(np.float32)])
     assert np.isfinite(t_dev).all(), f"{(~np.isfinite(t_dev)).sum()} rays escaped the closed box"

@@ -8,13 +8,33 @@ import numpy as np
 
 f3 = (np.float32, 3)
 
-# Flattened BVH node, depth-first order. Interior (count == 0): left child is the next node,
+# Binary BVH node of the host-side builder (volcl.bvh), depth-first order; the device gets the
+# wide nodes below, collapsed from these. Interior (count == 0): left child is the next node,
 # `index` is the right child. Leaf (count > 0): primitives [index, index + count) of the
 # BVH-ordered primitive list.
 BVH_NODE = np.dtype([
     ("bmin", *f3), ("index", np.int32),
     ("bmax", *f3), ("count", np.int32),
 ])
+
+# The device's wide BVH node (kernels/types.h BvhWideNode; built by volcl.bvh_wide): the boxes of
+# up to BVH_WIDTH children as six rows (min x, y, z, max x, y, z) of BVH_WIDTH floats, so one
+# vector load fetches a slab plane of every child, then the child references.
+BVH_WIDTH = 8
+
+
+def bvh_wide_node(width=BVH_WIDTH):
+    return np.dtype([("bounds", np.float32, (6, width)), ("child", np.int32, width)])
+
+
+BVH_WIDE_NODE = bvh_wide_node()
+
+# Up to LEAF_WIDTH primitives of a BVH leaf (kernels/types.h LeafPacket): triangle vertices as nine
+# rows (p0 xyz, p1 xyz, p2 xyz) of LEAF_WIDTH floats, the primitives' codes, and -1 for each
+# primitive with an opaque surface (0 for null surfaces and unused lanes).
+LEAF_WIDTH = 4
+LEAF_PACKET = np.dtype([("v", np.float32, (9, LEAF_WIDTH)), ("prim", np.int32, LEAF_WIDTH),
+                        ("opaque", np.int32, LEAF_WIDTH)])
 
 TRIANGLE = np.dtype([
     ("p0", *f3), ("shape", np.int32),
@@ -145,7 +165,7 @@ HIDE_EMITTERS = {"off": 0, "dark": 1, "skip": 2}
 
 # name in kernels/types.h -> dtype, for the layout probe
 SHARED_STRUCTS = {
-    "BvhNode": BVH_NODE, "Triangle": TRIANGLE, "TriangleNormals": TRIANGLE_NORMALS, "Sphere": SPHERE,
+    "BvhWideNode": BVH_WIDE_NODE, "LeafPacket": LEAF_PACKET, "Triangle": TRIANGLE, "TriangleNormals": TRIANGLE_NORMALS, "Sphere": SPHERE,
     "Cylinder": CYLINDER,
     "ShapeInfo": SHAPE_INFO, "Bsdf": BSDF, "Light": LIGHT, "Medium": MEDIUM, "GridVolume": GRID_VOLUME,
     "RenderParams": RENDER_PARAMS, "TriangleUv": TRIANGLE_UV, "UvMap": UV_MAP, "Texture": TEXTURE,

@@ -1,5 +1,5 @@
-"""Triangle meshes: OBJ/PLY files read through trimesh, Mitsuba's .serialized files (volcl.serialized),
-and the primitive shapes scenes name.
+"""Triangle meshes: OBJ files (read here), PLY files (read through trimesh), Mitsuba's .serialized
+files (volcl.serialized), and the primitive shapes scenes name.
 
 Everything here is in object space; volcl.scene places meshes in the world. A mesh is a
 `TriangleMesh` of float64 vertices (n, 3), int64 faces (m, 3), optional per-vertex shading
@@ -45,33 +45,103 @@ def load_mesh(path: str, fmt: Optional[str] = None, shape_index: int = 0) -> Tri
         # Also refuses devices such as /dev/zero, which would never finish reading.
         raise VolclError("mesh file not found (or not a regular file)", file=path)
     try:
-        with open(path, "rb") as fh, _quiet_trimesh():
-            parts = _read_parts(fh, ext)
-            mesh = _concatenate(parts)
+        with open(path, "rb") as fh:
+            if ext == "obj":
+                mesh = _read_obj(fh.read())
+            else:
+                with _quiet_trimesh():
+                    mesh = _concatenate(_read_parts(fh, ext))
     except OSError as exc:
         raise VolclError(f"cannot read mesh file: {exc.strerror or exc}", file=path) from None
-    except Exception as exc:  # trimesh's parsers raise many unrelated types on bad input
+    except Exception as exc:  # the parsers raise many unrelated types on bad input
         raise VolclError(f"cannot parse {ext.upper()} mesh: {type(exc).__name__}: {exc}",
                          file=path) from None
     return _validated(mesh, path)
 
 
-def _read_parts(fh, ext: str) -> list[dict]:
-    """The file's geometry as a list of trimesh keyword dicts (one per OBJ object/material group).
+def _read_obj(data: bytes) -> TriangleMesh:
+    """An OBJ file's faces as one mesh (groups and objects joined, as Mitsuba does; materials
+    skipped: volcl takes materials from the scene file, and the Nori meshes name .mtl files that
+    do not exist).
 
-    The loaders are called directly rather than through trimesh.load so that 'vertex_normals'
-    appears exactly when the file stores normals, instead of being computed (or dropped while
-    joining groups). Materials are skipped: volcl takes materials from the scene file, and the
-    Nori meshes name .mtl files that do not exist.
+    Read here rather than through trimesh, whose import (it pulls in scipy where that is
+    installed) took longer than a whole small render. The result matches trimesh's OBJ loader
+    corner for corner: faces in file order, a quad split into (0, 1, 2) and (2, 3, 0), larger
+    polygons into a fan around their first corner, negative indices counted back from the
+    vertices defined so far, and one vertex per distinct (position, texture coordinate, normal)
+    triple, with shading normals (texture coordinates) exactly when every corner of the file
+    names one.
     """
-    from trimesh.exchange.obj import load_obj
-    from trimesh.exchange.ply import load_ply
+    positions, normal_rows, uv_rows = [], [], []
+    corner_v, corner_t, corner_n, sizes = [], [], [], []
+    for line in data.decode("utf-8", "replace").splitlines():
+        tokens = line.split()
+        if not tokens:
+            continue
+        key = tokens[0]
+        if key == "v":
+            positions.append(tokens[1:4])
+        elif key == "vn":
+            normal_rows.append(tokens[1:4])
+        elif key == "vt":
+            uv_rows.append((tokens[1:3] + ["0"])[:2])
+        elif key == "f":
+            nv, nt, nn = len(positions), len(uv_rows), len(normal_rows)
+            for corner in tokens[1:]:
+                idx = corner.split("/")
+                v = int(idx[0])
+                corner_v.append(v - 1 if v > 0 else nv + v)
+                vt = int(idx[1]) if len(idx) > 1 and idx[1] else 0
+                corner_t.append(vt - 1 if vt > 0 else (nt + vt if vt < 0 else -1))
+                n = int(idx[2]) if len(idx) > 2 and idx[2] else 0
+                corner_n.append(n - 1 if n > 0 else (nn + n if n < 0 else -1))
+            sizes.append(len(tokens) - 1)
+    if any(len(row) != 3 for row in positions) or any(len(row) != 3 for row in normal_rows):
+        raise ValueError("a v or vn line has fewer than three coordinates")
+    pos = np.array(positions, dtype=np.float64).reshape(-1, 3)
+    nrm = np.array(normal_rows, dtype=np.float64).reshape(-1, 3)
+    tex = np.array(uv_rows, dtype=np.float64).reshape(-1, 2)
+    corners = _triangulate_polygons(np.array(sizes, dtype=np.int64))
+    cv = np.array(corner_v, dtype=np.int64)[corners]
+    ct = np.array(corner_t, dtype=np.int64)[corners]
+    cn = np.array(corner_n, dtype=np.int64)[corners]
+    if len(cv) == 0:
+        return TriangleMesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
+    bad = (cv < 0) | (cv >= len(pos))
+    with_normals = bool(len(cn)) and bool(np.all((cn >= 0) & (cn < len(nrm))))
+    with_uvs = bool(len(ct)) and bool(np.all((ct >= 0) & (ct < len(tex))))
+    keys = np.stack([cv, ct if with_uvs else np.zeros_like(ct), cn if with_normals else np.zeros_like(cn)],
+                    axis=-1).reshape(-1, 3)
+    unique, inverse = np.unique(keys, axis=0, return_inverse=True)
+    faces = inverse.reshape(-1, 3)
+    if bad.any():
+        faces[bad] = -1         # refused by _validated: faces that index missing vertices
+    verts = pos[np.clip(unique[:, 0], 0, max(len(pos) - 1, 0))] if len(pos) else np.zeros((len(unique), 3))
+    return TriangleMesh(verts, faces.astype(np.int64), nrm[unique[:, 2]] if with_normals else None,
+                        tex[unique[:, 1]] if with_uvs else None)
 
-    if ext == "obj":
-        # OBJ has no transforms, so the scene graph trimesh also returns is all identities. A corner
-        # with its own v/vt/vn triple becomes its own vertex, which keeps per-corner normals.
-        loaded = load_obj(fh, skip_materials=True)
-        return list(loaded.get("geometry", {}).values())
+
+def _triangulate_polygons(sizes: np.ndarray) -> np.ndarray:
+    """Corner indices (m, 3) into the concatenated polygons of the given sizes: triangles as they
+    are, quads as (0, 1, 2), (2, 3, 0), larger polygons as fans (0, i, i + 1), in polygon order."""
+    if len(sizes) and sizes.min() < 3:
+        raise ValueError(f"a face has {int(sizes.min())} corners")
+    start = np.cumsum(sizes) - sizes
+    per = np.maximum(sizes - 2, 0)
+    poly = np.repeat(np.arange(len(sizes)), per)
+    i = np.arange(per.sum()) - np.repeat(np.cumsum(per) - per, per)
+    tri = np.stack([np.zeros_like(i), i + 1, i + 2], axis=1)
+    quad = sizes[poly] == 4
+    tri[quad & (i == 1)] = [2, 3, 0]
+    return start[poly][:, None] + tri
+
+
+def _read_parts(fh, ext: str) -> list[dict]:
+    """A PLY file's geometry as a trimesh keyword dict, in a list.
+
+    The loader is called directly rather than through trimesh.load so that 'vertex_normals'
+    appears exactly when the file stores normals, instead of being computed."""
+    from trimesh.exchange.ply import load_ply
     return [load_ply(fh, skip_materials=True)]
 
 
@@ -222,18 +292,16 @@ def closure_problem(vertices: np.ndarray, faces: np.ndarray) -> Optional[str]:
     count as shared only when their float32 coordinates are equal, as they must be for the
     watertight intersection test; zero-area triangles are left out (rays never hit them).
     """
-    import trimesh
-
     v32 = np.asarray(vertices, dtype=np.float32)
     unique, inverse = np.unique(v32, axis=0, return_inverse=True)
     f = inverse.reshape(-1)[np.asarray(faces)].reshape(-1, 3)
     f = f[triangle_areas32(unique, f) > 0]
     if len(f) == 0:
         return "all of its triangles have zero area"
-    mesh = trimesh.Trimesh(unique.astype(np.float64), f, process=False, validate=False)
-    if not mesh.is_watertight:
-        edges = np.sort(mesh.edges, axis=1)
-        _, first, counts = np.unique(edges, axis=0, return_index=True, return_counts=True)
+    directed = f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    edges = np.sort(directed, axis=1)
+    _, first, counts = np.unique(edges, axis=0, return_index=True, return_counts=True)
+    if np.any(counts != 2):
         open_edges, shared = int((counts == 1).sum()), int((counts > 2).sum())
         parts = []
         if open_edges:
@@ -245,7 +313,9 @@ def closure_problem(vertices: np.ndarray, faces: np.ndarray) -> Optional[str]:
             parts.append(f"{shared} edges are shared by more than two triangles (non-manifold, e.g. "
                          f"the edge from {_point(unique[a])} to {_point(unique[b])})")
         return "it is not closed: " + "; ".join(parts)
-    if not mesh.is_winding_consistent:
+    # closed: consistently wound exactly when the two triangles at each edge run it in opposite
+    # directions, i.e. no directed edge occurs twice
+    if len(np.unique(directed, axis=0)) != len(directed):
         return ("its triangles are not wound consistently (some face normals point inwards, some "
                 "outwards), so inside and outside are undefined")
     return None

@@ -8,8 +8,8 @@ A `Packer` holds what depends on the scene's structure only (which objects exist
 uses which bsdf, light and media: the indices the arrays refer to each other by) and packs the
 arrays in parts, so that an edited value (volcl.params) repacks only the part it lives in:
 
-    geometry   triangles, normals, spheres, cylinders, BVH,            vertex positions, transforms
-               texture coordinates and parametrizations
+    geometry   triangles, normals, spheres, cylinders, BVH (nodes,   vertex positions, transforms
+               leaves), texture coordinates and parametrizations
     lights     light records, area-light triangle CDFs, envmaps     emitter values, geometry
     shapes     per-shape bsdf, light and media indices              structure only
     bsdfs      bsdf records, textures and texels, bsdf tables       bsdf colours, IORs, roughness,
@@ -28,12 +28,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import envmap, layout
-from .bvh import build_bvh
+from .bvh_wide import device_bvh, empty_wide
 from .errors import VolclError
 from .features import detect
 from .grids import GridPacker
 from .mesh import triangle_areas32
-from .pack_materials import MaterialPacker, reads_uv
+from .pack_materials import MaterialPacker, reads_uv, transmits
 from .phase import PhasePacker
 from .scene.model import Camera, Filter, Scene
 from .scene import transform as tf
@@ -43,7 +43,7 @@ FILTER_TABLE_SIZE = 4097
 
 # part -> the arrays it packs, in the order parts are packed (shapes name the lights)
 PARTS = {
-    "geometry": ("nodes", "prim_ids", "triangles", "normals", "spheres", "cylinders", "tri_uvs", "uv_maps"),
+    "geometry": ("nodes", "leaves", "triangles", "normals", "spheres", "cylinders", "tri_uvs", "uv_maps"),
     "lights": ("lights", "light_tri_cdf", "light_tris", "env_data"),
     "shapes": ("shapes",),
     "bsdfs": ("bsdfs", "textures", "texels", "bsdf_tables"),
@@ -51,7 +51,7 @@ PARTS = {
     "camera": ("filter_table",),
 }
 # the kernel's buffer arguments, in order (kernels/render.cl)
-ARG_ORDER = ("nodes", "prim_ids", "triangles", "normals", "spheres", "cylinders", "shapes", "bsdfs", "lights",
+ARG_ORDER = ("nodes", "leaves", "triangles", "normals", "spheres", "cylinders", "shapes", "bsdfs", "lights",
              "light_tri_cdf", "light_tris", "env_data", "media", "grids", "grid_data", "params", "filter_table",
              "tri_uvs", "uv_maps", "textures", "texels", "bsdf_tables", "phase_lobes", "phase_tables")
 
@@ -305,17 +305,21 @@ class Packer:
         codes = np.concatenate(codes)
         t0 = time.perf_counter()
         if len(codes):
-            nodes, order = build_bvh(np.concatenate(lo), np.concatenate(hi), max_leaf=self.max_leaf)
-            prim_ids = codes[order].astype(np.int32)
+            # shadow rays stop at the first opaque surface (kernels/bvh.h TRACE_SHADOW); a shape's
+            # bsdf kind is structure, so the mask never needs repacking after an edit
+            shape_opaque = np.array([not transmits(s.bsdf) for s in self.scene.shapes], bool)
+            analytic_shape = np.array([self.shape_index[id(s)] for s in self.sphere_shapes + self.cylinder_shapes],
+                                      np.int64)
+            opaque = np.concatenate([shape_opaque[tri_shape], shape_opaque[analytic_shape]])
+            nodes, leaves = device_bvh(codes, np.concatenate(lo), np.concatenate(hi), tri_v, opaque,
+                                       max_leaf=self.max_leaf)
             self.bounds = (np.concatenate(lo).min(0), np.concatenate(hi).max(0))
         else:
-            nodes = np.zeros(1, layout.BVH_NODE)
-            nodes["bmin"], nodes["bmax"], nodes["count"] = np.inf, -np.inf, 1
-            prim_ids = np.zeros(1, np.int32)
+            nodes, leaves = empty_wide(), np.zeros(1, layout.LEAF_PACKET)
             self.bounds = (np.zeros(3), np.zeros(3))
         self.bvh_seconds = time.perf_counter() - t0
         self.triangle_count = ntri
-        self.arrays.update(nodes=nodes, prim_ids=prim_ids, triangles=tris, normals=normals, spheres=spheres,
+        self.arrays.update(nodes=nodes, leaves=leaves, triangles=tris, normals=normals, spheres=spheres,
                            cylinders=cylinders, tri_uvs=tri_uvs, uv_maps=self._uv_maps())
 
     def _triangle_uvs(self, tris: np.ndarray) -> np.ndarray:

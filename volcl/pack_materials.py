@@ -57,6 +57,14 @@ def passes(bsdf: Bsdf) -> bool:
     return any(b.kind in ("mask", "thindielectric") for b in chain(bsdf))
 
 
+def transmits(bsdf: Bsdf) -> bool:
+    """Whether shadow rays can pass through it (kernels/bsdf_vertex.h surface_null_transmission): null
+    surfaces, masks (opacity below one somewhere) and thin dielectrics. The others are opaque to the
+    BVH's shadow query, which stops at the first opaque surface. A structural property: editing an
+    opacity never changes it."""
+    return bsdf.kind == "null" or passes(bsdf)
+
+
 class MaterialPacker:
     """Indices of every bsdf record and texture of a scene (its structure), and their packing."""
 

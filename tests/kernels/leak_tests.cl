@@ -11,13 +11,13 @@
 #include "bvh.h"
 #include "surface.h"
 
-VOLCL_KERNEL void walk_inside(__global const BvhNode *nodes, __global const int *prim_ids,
+VOLCL_KERNEL void walk_inside(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
                           __global const Triangle *triangles, __global const float *starts,
                           __global int *leaks, __global int *hits, int bounces) {
     int i = get_global_id(0);
     SceneData sc;
     sc.nodes = nodes;
-    sc.prim_ids = prim_ids;
+    sc.leaves = leaves;
     sc.triangles = triangles;
     Rng rng = rng_init(12345u, (uint)i, 0u);
     float3 o = vload3(i, starts);
@@ -25,7 +25,7 @@ VOLCL_KERNEL void walk_inside(__global const BvhNode *nodes, __global const int 
     int leaked = 0, n_hits = 0;
     for (int b = 0; b < bounces; ++b) {
         Hit h;
-        if (!bvh_trace(&sc, o, d, INFINITY, false, &h)) { leaked = 1; break; }
+        if (!bvh_trace(&sc, o, d, INFINITY, TRACE_CLOSEST, &h)) { leaked = 1; break; }
         ++n_hits;
         SurfacePoint s = surface_point(&sc, &h, o, d);
         /* the inside is the side the ray arrived from */

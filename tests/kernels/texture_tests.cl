@@ -24,7 +24,7 @@ VOLCL_KERNEL void texture_lookups(__global const Texture *textures, __global con
 }
 
 /* uv, dp/du and dp/dv where ray i first hits the scene; hit[i] the shape index, or -1. */
-VOLCL_KERNEL void surface_uvs(__global const BvhNode *nodes, __global const int *prim_ids,
+VOLCL_KERNEL void surface_uvs(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
                           __global const Triangle *triangles, __global const TriangleNormals *normals,
                           __global const Sphere *spheres, __global const Cylinder *cylinders,
                           __global const ShapeInfo *shapes, __global const TriangleUv *tri_uvs,
@@ -34,7 +34,7 @@ VOLCL_KERNEL void surface_uvs(__global const BvhNode *nodes, __global const int 
     int i = get_global_id(0);
     SceneData sc;
     sc.nodes = nodes;
-    sc.prim_ids = prim_ids;
+    sc.leaves = leaves;
     sc.triangles = triangles;
     sc.normals = normals;
     sc.spheres = spheres;
@@ -48,7 +48,7 @@ VOLCL_KERNEL void surface_uvs(__global const BvhNode *nodes, __global const int 
     vstore2((float2)(0.0f), i, uv_out);
     vstore3((float3)(0.0f), i, dpdu_out);
     vstore3((float3)(0.0f), i, dpdv_out);
-    if (!bvh_trace(&sc, o, d, INFINITY, false, &h)) return;
+    if (!bvh_trace(&sc, o, d, INFINITY, TRACE_CLOSEST, &h)) return;
     SurfacePoint s = surface_point(&sc, &h, o, d);
     surface_texcoords(&sc, &h, &s);
     hit_out[i] = s.shape;
