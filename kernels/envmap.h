@@ -49,7 +49,10 @@ inline EnvPatch envmap_patch(__global const Light *l, float3 d, float sin_theta)
     return p;
 }
 
-inline float3 envmap_texel(__global const float *texels, int w, int i, int j) { return vload3(j * w + i, texels); }
+/* i, j >= 0: texel indices within the map */
+inline float3 envmap_texel(__global const float *texels, int w, int i, int j) {
+    return vload3((size_t)j * (size_t)w + (size_t)i, texels);
+}
 
 /* Radiance of the map at a patch point: the bilinear lookup, periodic across the seam. */
 inline float3 envmap_value(const SceneData *sc, __global const Light *l, EnvPatch p) {

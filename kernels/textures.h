@@ -50,7 +50,10 @@ inline float texel_coordinate(float c) { return clamp(c, -16777216.0f, 16777216.
 inline float3 bitmap_lookup(const SceneData *sc, __global const Texture *t, float2 uv) {
     float2 p = texture_map_uv(t, uv);
     float px = texel_coordinate(p.x * (float)t->width), py = texel_coordinate(p.y * (float)t->height);
-    if (t->filter == TEX_FILTER_NEAREST) return texel_fetch(sc, t, (int)floor(px), (int)floor(py));
+    if (t->filter == TEX_FILTER_NEAREST) {
+        float nx = floor(px), ny = floor(py);
+        return texel_fetch(sc, t, (int)nx, (int)ny);
+    }
     px -= 0.5f;
     py -= 0.5f;
     float fx = floor(px), fy = floor(py);
