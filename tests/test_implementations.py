@@ -78,11 +78,27 @@ def test_intel_runtime_needs_the_kernel_attribute():
     assert not np.array_equal(out, want)
 
 
-def test_self_test_rejects_the_miscompiled_kernels(monkeypatch):
-    """With the hint taken away (-DVOLCL_KERNEL=__kernel) Intel's runtime renders wrong images:
-    the self-test says so, and the default choice skips the device by name."""
+def _wrong_on_intel(monkeypatch):
+    """Make every image rendered on Intel's runtime 1.5x too bright: a device whose kernels build
+    and run but compute wrong answers. (Taking VOLCL_KERNEL's hint away did that to the megakernel
+    before the wide BVH; since then the self-test scenes no longer reach the miscompiled calls, and
+    the reproducer above is what shows the runtime's bug.)"""
+    from volcl import renderer
+    result = renderer.Renderer.result
+
+    def wrong(self):
+        res = result(self)
+        if "intel" in self.device.platform_name.lower():
+            res.image = res.image * 1.5
+        return res
+    monkeypatch.setattr(renderer.Renderer, "result", wrong)
+
+
+def test_self_test_rejects_a_device_that_renders_wrong_images(monkeypatch):
+    """A device that computes wrong images fails the self-test, and the default choice skips it by
+    name."""
+    _wrong_on_intel(monkeypatch)
     intel = _intel()
-    monkeypatch.setenv("VOLCL_BUILD_OPTIONS", "-DVOLCL_KERNEL=__kernel")
     monkeypatch.setattr(intel, "_trusted", None)
     result = selftest.run(intel)
     assert not result.ok and "standard errors" in result.message, result.message
@@ -204,22 +220,32 @@ def _volcl(*args, code=CLI, **env):
                           capture_output=True, text=True)
 
 
+# images rendered on Intel's runtime made 1.5x too bright (as _wrong_on_intel does), then the CLI
+WRONG_ON_INTEL = ("import volcl.renderer as R; _res = R.Renderer.result\n"
+                  "def _wrong(self):\n"
+                  "    res = _res(self)\n"
+                  "    if 'intel' in self.device.platform_name.lower(): res.image = res.image * 1.5\n"
+                  "    return res\n"
+                  "R.Renderer.result = _wrong\n")
+
+
 def test_command_line_names_a_device_that_fails_the_self_test(tmp_path):
-    """With the hint taken away Intel's runtime fails the self-test: `volcl devices` shows it, a
-    render asked of that device stops with it named, and the default choice skips it, saying so."""
+    """A device that renders wrong images fails the self-test: `volcl devices` shows it, a render
+    asked of that device stops with it named, and the default choice skips it, saying so."""
     intel = _intel()
-    broken = {"VOLCL_BUILD_OPTIONS": "-DVOLCL_KERNEL=__kernel"}
-    r = _volcl("devices", **broken)
+    broken = {}
+    r = _volcl("devices", code=WRONG_ON_INTEL + CLI, **broken)
     assert r.returncode == 0, r.stderr
     line = next(ln for ln in r.stdout.splitlines() if ln.startswith(intel.key + " "))
     assert " FAIL " in line and "standard errors" in line, line
     out = tmp_path / "x.exr"
-    r = _volcl("render", "scenes/cbox.xml", "-o", out, "--spp", 1, "--device", "Intel", **broken)
+    r = _volcl("render", "scenes/cbox.xml", "-o", out, "--spp", 1, "--device", "Intel",
+               code=WRONG_ON_INTEL + CLI, **broken)
     assert r.returncode == 2
     assert f"{intel.key} {intel.name} ({intel.platform_name}): self-test failed" in r.stderr, r.stderr
     assert not out.exists()
     r = _volcl("render", "scenes/cbox.xml", "-o", out, "--spp", 1, "--width", 8, "--height", 8, "-q",
-               code=CLI_INTEL_FIRST, **broken)
+               code=WRONG_ON_INTEL + CLI_INTEL_FIRST, **broken)
     assert r.returncode == 0, r.stderr
     assert f"volcl: warning: skipping OpenCL device {intel.key} {intel.name}" in r.stderr, r.stderr
     assert out.exists()
