@@ -11,6 +11,8 @@ typedef struct {
     float3 ns;
     int shape;
     float mag;      /* magnitude of the coordinates p was computed from: scales offset_origin */
+    float2 uv;      /* texture coordinates and position derivatives: set by surface_texcoords */
+    float3 dpdu, dpdv;  /* (texcoords.h) where the bsdf reads them */
 } SurfacePoint;
 
 /* Hazard: forcing the inlining of a function that returns a struct makes LLVM 14 (at -O0 too) mark

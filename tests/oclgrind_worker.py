@@ -113,6 +113,9 @@ FAMILIES = {
     "thinlens_camera": THINLENS,
     "orthographic_camera": ORTHOGRAPHIC,
     "direct_integrator": DIRECT,
+    "envmap": shipped("cloud_sky"),            # envmap lookups and sampling, a grid medium under it
+    "rough_glass_textures": shipped("rough_glass_medium"),   # roughdielectric, checkerboard, envmap
+    "rough_bsdfs_bitmaps_bump_maps": shipped("textured_cbox"),  # roughconductor/plastic, bitmaps, bump and normal maps
     "every_feature": every_feature,
 }
 

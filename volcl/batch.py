@@ -246,8 +246,8 @@ def render_job(job: Job, devices, stop: StopRequest, scene_options: SceneOptions
     # render stops at whichever comes first), while a target error runs until it is met
     spp = render.spp or (None if render.target_error else scene.spp)
     estimator = render.estimator
-    if not estimator.nee and any(e.kind in ("point", "directional") for e in scene.model.emitters):
-        print(f"volcl: warning: {job.scene}: with --nee off, point and directional lights are never found (no "
+    if not estimator.nee and any(e.kind in ("point", "spot", "directional") for e in scene.model.emitters):
+        print(f"volcl: warning: {job.scene}: with --nee off, point, spot and directional lights are never found (no "
               "path can hit them)", file=sys.stderr)
     ckpt = checkpoint.path_for(out)
     state = meta = None

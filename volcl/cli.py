@@ -145,7 +145,9 @@ def cmd_info(args):
     cylinders = packed.stats.get("cylinders", 0)
     print(f"shapes     {len(scene.shapes)} ({packed.triangle_count} triangles, {packed.sphere_count} spheres"
           + (f", {cylinders} cylinders)" if cylinders else ")"))
-    kinds = ["area"] * sum(s.emitter_radiance is not None for s in scene.shapes) + [e.kind for e in scene.emitters]
+    kinds = ["area"] * sum(s.emitter_radiance is not None for s in scene.shapes) + [
+        f"envmap {e.image.shape[1]}x{e.image.shape[0]}, {packed.arrays['env_data'].nbytes / 2**20:.1f} MiB"
+        if e.kind == "envmap" else e.kind for e in scene.emitters]
     print(f"emitters   {len(kinds)}" + (f" ({', '.join(kinds)})" if kinds else ""))
     media_kinds = [m.kind + (f" ({_grid_text(m.sigma_t)})" if m.kind == "heterogeneous" else "") for m in scene.media]
     print(f"media      {len(scene.media)}" + (f": {', '.join(media_kinds)}" if media_kinds else ""))
@@ -248,8 +250,8 @@ def main(argv=None):
         sp.add_argument("--mis", choices=("on", "off"), default="on",
                         help="combine light sampling with BSDF / phase sampling by MIS (default on)")
         sp.add_argument("--equiangular", choices=("auto", "on", "off"), default="auto",
-                        help="equiangular sampling towards point lights in media; auto: where a point "
-                             "light is inside a medium (default auto)")
+                        help="equiangular sampling towards point and spot lights in media; auto: where "
+                             "such a light is inside a medium (default auto)")
         sp.add_argument("--equiangular-mis", choices=("two", "one"), default="two",
                         help="combine equiangular and distance samples by two-sample (default) or "
                              "one-sample MIS")

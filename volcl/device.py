@@ -305,6 +305,11 @@ def _size(n: int) -> str:
     return f"{n / 2**20:.1f} MiB" if n < 2**30 else f"{n / 2**30:.2f} GiB"
 
 
+# what to cut down when one buffer is too large
+_FEWER = {"texels": "smaller or fewer textures", "tri_uvs": "fewer textured triangles",
+          "grid_data": "smaller volume grids", "env_data": "a smaller environment map"}
+
+
 def check_fits(info: Device, buffers: dict[str, int], accumulator_bytes: int = 0, notes: str = "") -> None:
     """Raise VolclError when a scene's buffers (name -> bytes) cannot live on the device: one of them
     above its largest single allocation, or all of them (with the image accumulators) above its
@@ -315,10 +320,11 @@ def check_fits(info: Device, buffers: dict[str, int], accumulator_bytes: int = 0
     max_alloc, global_mem = int(dev.max_mem_alloc_size), int(dev.global_mem_size)
     name, biggest = max(buffers.items(), key=lambda item: item[1])
     if biggest > max_alloc:
+        fewer = _FEWER.get(name, "fewer triangles")
         raise VolclError(f"the scene is too large for device {info.key} {info.name}: its {name} buffer "
                          f"needs {_size(biggest)} ({biggest} bytes), but the device allocates at most "
                          f"{_size(max_alloc)} ({max_alloc} bytes) in one buffer; simplify the scene "
-                         f"(fewer triangles) or choose a device with more memory (--device)" + notes)
+                         f"({fewer}) or choose a device with more memory (--device)" + notes)
     total = sum(buffers.values()) + accumulator_bytes
     if total > global_mem:
         raise VolclError(f"the scene is too large for device {info.key} {info.name}: its buffers and "

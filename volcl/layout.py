@@ -39,10 +39,17 @@ LEAF_PACKET = np.dtype([("v", np.float32, (9, LEAF_WIDTH)), ("prim", np.int32, L
 TRIANGLE = np.dtype([
     ("p0", *f3), ("shape", np.int32),
     ("p1", *f3), ("normals", np.int32),
-    ("p2", *f3), ("pad0", np.int32),
+    ("p2", *f3), ("uvs", np.int32),
 ])
 
 TRIANGLE_NORMALS = np.dtype([("n0", *f3), ("n1", *f3), ("n2", *f3), ("pad0", np.int32, 3)])
+
+# corner texture coordinates of a triangle (kernels/texcoords.h)
+TRIANGLE_UV = np.dtype([("uv", np.float32, 6), ("pad0", np.float32, 2)])
+
+UV_MAP_KINDS = {"sphere": 0, "disk": 1}
+UV_MAP = np.dtype([("kind", np.int32), ("pad0", np.int32, 3),
+                   ("to_world", np.float32, 12), ("to_object", np.float32, 12)])
 
 SPHERE = np.dtype([
     ("center", *f3), ("radius", np.float32),
@@ -58,23 +65,51 @@ CYLINDER_CODE_BASE = 1 << 30
 
 SHAPE_INFO = np.dtype([
     ("bsdf", np.int32), ("light", np.int32), ("interior", np.int32), ("exterior", np.int32),
-    ("is_transition", np.int32), ("pad0", np.int32, 3),
+    ("is_transition", np.int32), ("uv_map", np.int32), ("pad0", np.int32, 2),
 ])
 
-BSDF_TYPES = {"diffuse": 0, "dielectric": 1, "conductor": 2, "null": 3}
+BSDF_TYPES = {"diffuse": 0, "dielectric": 1, "conductor": 2, "null": 3, "roughconductor": 4, "roughdielectric": 5,
+              "plastic": 6, "roughplastic": 7, "thindielectric": 8, "mask": 9, "bumpmap": 10, "normalmap": 11}
+BSDF_FLAGS = {"uv": 1, "uv_frame": 2, "passes": 4, "nonlinear": 8, "visible": 16, "shadowing": 32,
+              "flip_invalid": 64}
+MICROFACETS = {"beckmann": 0, "ggx": 1}
 BSDF = np.dtype([
     ("type", np.int32), ("twosided", np.int32), ("eta", np.float32), ("conductor_mirror", np.int32),
-    ("color", *f3), ("pad0", np.float32),
-    ("cond_eta", *f3), ("pad1", np.float32),
-    ("cond_k", *f3), ("pad2", np.float32),
+    ("color", *f3), ("color_tex", np.int32),
+    ("cond_eta", *f3), ("eta_tex", np.int32),
+    ("cond_k", *f3), ("k_tex", np.int32),
+    ("spec_r", *f3), ("spec_r_tex", np.int32),
+    ("spec_t", *f3), ("spec_t_tex", np.int32),
+    ("alpha_u", np.float32), ("alpha_v", np.float32), ("alpha_u_tex", np.int32), ("alpha_v_tex", np.int32),
+    ("distribution", np.int32), ("flags", np.int32), ("nested", np.int32), ("table", np.int32),
+    ("opacity", np.float32), ("opacity_tex", np.int32), ("scale", np.float32), ("map_tex", np.int32),
+    ("spec_weight", np.float32), ("internal_refl", np.float32), ("inv_eta2", np.float32), ("pad0", np.int32),
+])
+# the texture-index fields of a BSDF record, -1 for "the constant beside it"
+BSDF_TEXTURE_FIELDS = ("color_tex", "eta_tex", "k_tex", "spec_r_tex", "spec_t_tex", "alpha_u_tex", "alpha_v_tex",
+                       "opacity_tex", "map_tex")
+
+TEXTURE_TYPES = {"bitmap": 0, "checkerboard": 1}
+TEXTURE_FILTERS = {"bilinear": 0, "nearest": 1}
+TEXTURE_WRAPS = {"repeat": 0, "mirror": 1, "clamp": 2}
+TEXTURE = np.dtype([
+    ("type", np.int32), ("channels", np.int32), ("width", np.int32), ("height", np.int32),
+    ("data", np.int32), ("filter", np.int32), ("wrap", np.int32), ("child0", np.int32),
+    ("child1", np.int32), ("pad0", np.int32, 3),
+    ("to_uv", np.float32, 6), ("pad1", np.float32, 2),
+    ("color0", *f3), ("mean0", np.float32),
+    ("color1", *f3), ("mean1", np.float32),
 ])
 
-LIGHT_TYPES = {"area": 0, "point": 1, "directional": 2, "constant": 3}
+LIGHT_TYPES = {"area": 0, "point": 1, "directional": 2, "constant": 3, "envmap": 4, "spot": 5}
 LIGHT = np.dtype([
     ("type", np.int32), ("tri_start", np.int32), ("tri_count", np.int32), ("sphere", np.int32),
     ("value", *f3), ("area", np.float32),
     ("position", *f3), ("pad0", np.float32),
     ("direction", *f3), ("pad1", np.float32),
+    ("to_local", np.float32, 9),
+    ("cos_cutoff", np.float32), ("cos_beam", np.float32), ("cutoff", np.float32), ("inv_transition", np.float32),
+    ("env_res", np.int32, 2), ("env_data", np.int32), ("env_norm", np.float32), ("texture", np.int32), ("tan_cutoff", np.float32), ("pad2", np.int32),
 ])
 
 MEDIUM_TYPES = {"homogeneous": 0, "heterogeneous": 1}
@@ -133,5 +168,6 @@ SHARED_STRUCTS = {
     "BvhWideNode": BVH_WIDE_NODE, "LeafPacket": LEAF_PACKET, "Triangle": TRIANGLE, "TriangleNormals": TRIANGLE_NORMALS, "Sphere": SPHERE,
     "Cylinder": CYLINDER,
     "ShapeInfo": SHAPE_INFO, "Bsdf": BSDF, "Light": LIGHT, "Medium": MEDIUM, "GridVolume": GRID_VOLUME,
-    "RenderParams": RENDER_PARAMS, "PhaseLobe": PHASE_LOBE,
+    "RenderParams": RENDER_PARAMS, "TriangleUv": TRIANGLE_UV, "UvMap": UV_MAP, "Texture": TEXTURE,
+    "PhaseLobe": PHASE_LOBE,
 }

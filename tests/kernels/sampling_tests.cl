@@ -169,11 +169,12 @@ VOLCL_KERNEL void phase_rayleigh_cos(__global const float *u, __global float *c)
 
 /* ---- bsdf.h ---- */
 
-/* One bsdf_sample per item for wo[i]; u1[i] >= 0 replaces the random component choice (edge cases).
- * info: (sampled, delta). The sampled wi is evaluated again with bsdf_eval. */
-VOLCL_KERNEL void bsdf_sample_dirs(__global const Bsdf *b, __global const float *wo_in, __global const float *u1_in,
-                               __global float *wi_out, __global float *weight, __global float *pdf,
-                               __global float *eta, __global int *info, __global float *value,
+/* One bsdf_sample per item for wo[i] with the bsdf's constants in the identity frame; u1[i] >= 0
+ * replaces the random component choice (edge cases). info: (sampled, delta, null event). The sampled
+ * wi is evaluated again with bsdf_eval. */
+VOLCL_KERNEL void bsdf_sample_dirs(__global const Bsdf *b, __global const float *tables, __global const float *wo_in,
+                               __global const float *u1_in, __global float *wi_out, __global float *weight,
+                               __global float *pdf, __global float *eta, __global int *info, __global float *value,
                                __global float *eval_pdf, uint seed) {
     int i = get_global_id(0);
     Rng r = rng_init(seed, i, 0);
@@ -181,29 +182,35 @@ VOLCL_KERNEL void bsdf_sample_dirs(__global const Bsdf *b, __global const float 
     float2 u2 = rng_next_float2(&r);
     if (u1_in[i] >= 0.0f) u1 = u1_in[i];
     float3 wo = vload3(i, wo_in);
+    BsdfVertex v = bsdf_vertex_local(b, tables, wo);
     BsdfSample s;
     s.wi = (float3)(0.0f);
     s.weight = (float3)(0.0f);
     s.pdf = 0.0f;
+    s.eta = 1.0f;
     s.delta = false;
-    bool ok = bsdf_sample(b, wo, u1, u2, &s);
+    s.null_event = false;
+    bool ok = bsdf_sample(&v, wo, u1, u2, &s);
     vstore3(ok ? s.wi : (float3)(0.0f), i, wi_out);
     vstore3(ok ? s.weight : (float3)(0.0f), i, weight);
     pdf[i] = ok ? s.pdf : 0.0f;
     eta[i] = s.eta;
-    info[2 * i] = ok ? 1 : 0;
-    info[2 * i + 1] = (ok && s.delta) ? 1 : 0;
+    info[3 * i] = ok ? 1 : 0;
+    info[3 * i + 1] = (ok && s.delta) ? 1 : 0;
+    info[3 * i + 2] = (ok && s.null_event) ? 1 : 0;
     float p;
-    vstore3(bsdf_eval(b, wo, ok ? s.wi : (float3)(0.0f, 0.0f, 1.0f), &p), i, value);
+    vstore3(bsdf_eval(&v, wo, ok ? s.wi : (float3)(0.0f, 0.0f, 1.0f), &p), i, value);
     eval_pdf[i] = p;
 }
 
 /* bsdf_eval for host-given pairs (wo, wi). */
-VOLCL_KERNEL void bsdf_eval_pairs(__global const Bsdf *b, __global const float *wo, __global const float *wi,
-                              __global float *value, __global float *pdf) {
+VOLCL_KERNEL void bsdf_eval_pairs(__global const Bsdf *b, __global const float *tables, __global const float *wo,
+                              __global const float *wi, __global float *value, __global float *pdf) {
     int i = get_global_id(0);
+    float3 o = vload3(i, wo);
+    BsdfVertex v = bsdf_vertex_local(b, tables, o);
     float p;
-    vstore3(bsdf_eval(b, vload3(i, wo), vload3(i, wi), &p), i, value);
+    vstore3(bsdf_eval(&v, o, vload3(i, wi), &p), i, value);
     pdf[i] = p;
 }
 

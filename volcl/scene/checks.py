@@ -114,6 +114,32 @@ def camera_transform(to_world: np.ndarray, kind: str = "perspective") -> np.ndar
     return to_world
 
 
+def envmap_transform(to_world: np.ndarray) -> np.ndarray:
+    """An envmap's to_world may rotate and mirror only: Mitsuba 3.9 turns directions with it without
+    normalizing them, so a scale or shear distorts its image and its sampling; a translation does
+    nothing to a map at infinity."""
+    scale = tf.similarity_scale(to_world)
+    if scale is None or abs(scale - 1) > 1e-4:
+        raise CheckError("an envmap's to_world may rotate and mirror, but not scale or shear (Mitsuba 3.9 "
+                         "turns directions with it without normalizing them, which distorts the map and its "
+                         "sampling)")
+    return to_world
+
+
+def spot_cutoff(value: float) -> float:
+    """A spot light's cutoff angle: (0, 180] degrees."""
+    if not 0 < value <= 180:
+        raise CheckError(f"'cutoff_angle' must lie in (0, 180] degrees, got {value}")
+    return value
+
+
+def spot_beam(value: float) -> float:
+    """A spot light's beam width: [0, 180] degrees."""
+    if not 0 <= value <= 180:
+        raise CheckError(f"'beam_width' must lie in [0, 180] degrees, got {value}")
+    return value
+
+
 def direction(value: np.ndarray) -> np.ndarray:
     """A unit direction from a non-zero vector."""
     d = tf.normalize(value)
