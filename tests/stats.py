@@ -460,6 +460,12 @@ def chi2_directions_charts(dirs, pdf, charts, refused: int | None = None, res=(3
         labels += [f"chart {k} theta [{width * te[p] / (1 - te[p]):.4g}, {width * te[p + 1] / (1 - te[p + 1]):.4g}) "
                    f"phi [{pe[q]:.3f}, {pe[q + 1]:.3f})" for p in range(res[0]) for q in range(res[1])]
     assert np.all(owned == 1), f"{what}: the chart regions do not partition the sphere"
+    return _finish_cells(counts_all, probs_all, labels, n, refused, what, check)
+
+
+def _finish_cells(counts_all, probs_all, labels, n, refused, what, check) -> ChiSquareResult:
+    """The test over cells from several parts of the sphere; with `refused` samples, the probability
+    the cells leave over is one more cell, the refused ones."""
     counts, probs = np.concatenate(counts_all), np.concatenate(probs_all)
     if refused is None:
         _check_total(probs, n, what)
@@ -497,17 +503,7 @@ def chi2_directions_zones(dirs, pdf, zones, refused: int | None = None, res=(31,
         labels += [f"cos [{ce[a]:.3f}, {ce[a + 1]:.3f}) phi [{pe[b]:.3f}, {pe[b + 1]:.3f})"
                    for a in range(res[0]) for b in range(res[1])]
     assert placed.all(), f"{what}: {(~placed).sum()} directions outside the zones, e.g. {d[~placed][:3].tolist()}"
-    counts, probs = np.concatenate(counts_all), np.concatenate(probs_all)
-    if refused is None:
-        _check_total(probs, n, what)
-    else:
-        rest = 1.0 - float(probs.sum())
-        if rest * n < -QUAD_FRACTION * math.sqrt(n):
-            raise QuadratureError(f"{what}: the pdf integrates to {probs.sum():.9g} > 1")
-        counts = np.append(counts, refused)
-        probs = np.append(probs, max(rest, 0.0))
-        labels.append("refused samples")
-    return _finish(counts, n * probs, what, labels, check)
+    return _finish_cells(counts_all, probs_all, labels, n, refused, what, check)
 
 
 def chi2_discrete(indices, probabilities, what: str = "discrete samples", check: bool = True) -> ChiSquareResult:

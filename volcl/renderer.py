@@ -209,13 +209,7 @@ class Renderer:
           stop()        a callback returning true (checked between passes: signals, checkpoints).
         With none of spp, time_limit and target_error, the scene's own spp. RenderResult.stop_reason
         names the rule that ended it; progress(n) is called after each pass with the samples added."""
-        if self.prepared.version != self.version:
-            raise VolclError("the scene was updated after this render began, so its samples would mix two "
-                             "scenes; start a new render (volcl.render does) to see the update")
-        if spp is None and time_limit is None and target_error is None:
-            spp = self.scene.spp
-        target = None if spp is None else self.samples_done + spp
-        self.spp_requested = target or 0
+        target = render_target(self, spp, time_limit, target_error)
         rules = StopRules(time_limit, target_error, min_spp, stop)
         reason = "spp"
         while target is None or self.samples_done < target:
@@ -364,6 +358,20 @@ def build_result(render, state: dict, tile: Tile) -> RenderResult:
                "bvh_seconds": packed.bvh_seconds, "features": describe(render.features), **packed.stats},
         seed=render.seed, tile=None if whole else tile, image_size=(render.width, render.height), info=info,
         second_moment=second_moment)
+
+
+def render_target(render, spp, time_limit, target_error) -> int | None:
+    """The spp at which a progressive render's call ends (None: another rule ends it), recorded as
+    its spp_requested; the scene's own spp when no rule is given. `render` is a Renderer or a
+    TiledRender; one whose scene was updated since it began is refused."""
+    if render.prepared.version != render.version:
+        raise VolclError("the scene was updated after this render began, so its samples would mix two "
+                         "scenes; start a new render (volcl.render does) to see the update")
+    if spp is None and time_limit is None and target_error is None:
+        spp = render.scene.spp
+    target = None if spp is None else render.samples_done + spp
+    render.spp_requested = target or 0
+    return target
 
 
 class StopRules:

@@ -30,7 +30,7 @@ import numpy as np
 from .errors import VolclError
 from .estimator import Estimator
 from .prepared import Scene as PreparedScene
-from .renderer import MIN_SPP_FOR_ERROR, Renderer, StopRules, build_result, data_hash, render_setup
+from .renderer import MIN_SPP_FOR_ERROR, Renderer, StopRules, build_result, data_hash, render_setup, render_target
 from .result import RenderResult
 from .scene.model import Scene as ModelScene
 from .tiles import Tile, accumulator_slots, tiles
@@ -204,13 +204,7 @@ class TiledRender:
                target_error: float | None = None, min_spp: int = MIN_SPP_FOR_ERROR, stop=None) -> RenderResult:
         """Renderer.render's rules, checked between rounds. Raises WorkersFailed (with the image of
         the last whole round) when no worker is left."""
-        if self.prepared.version != self.version:
-            raise VolclError("the scene was updated after this render began, so its samples would mix two "
-                             "scenes; start a new render (volcl.render does) to see the update")
-        if spp is None and time_limit is None and target_error is None:
-            spp = self.scene.spp
-        target = None if spp is None else self.samples_done + spp
-        self.spp_requested = target or 0
+        target = render_target(self, spp, time_limit, target_error)
         rules = StopRules(time_limit, target_error, min_spp, stop)
         reason = "spp"
         rate, last = None, 0
