@@ -2,11 +2,17 @@
 
 Dask distributed places the tasks, reruns a task elsewhere when its worker dies, and shows progress;
 volcl supplies the tasks and merges their results. A render is a volcl.rounds.TiledRender whose
-executor is a DaskExecutor: each round's tiles become Dask tasks ("add these samples to this
-tile, starting from this state"), whose results are the tiles' new accumulator states. A task
-depends on nothing but its arguments, so a worker that dies mid-task costs only that task, which
-Dask runs again on another worker, with the same bits; the client holds every tile's state after
-every round, which is what Ctrl-C writes, a checkpoint saves and --resume continues.
+executor is a DaskExecutor: the rounds of tiles of volcl.rounds (every tile adds the same samples
+n .. n + k - 1, and the image is merged and the stop rules checked once every tile has them) become
+Dask tasks ("add these samples to this tile, starting from this state"), whose results are the
+tiles' new accumulator states. The rounds are streamed: a tile's next round is submitted as soon
+as its last one returns (up to LOOKAHEAD rounds ahead of the image, earlier rounds first), so no
+worker waits at the end of a round for the others' last tiles, while the image, merged round by
+round in a fixed order, holds the bits of a local render at every round's end. A task depends on
+nothing but its arguments, so a worker that dies mid-task costs only that task, which Dask runs
+again on another worker, with the same bits; the client holds every tile's state at the image's
+last whole round, which is what Ctrl-C writes, a checkpoint saves and --resume continues, and what
+a render whose task fails on every try keeps (WorkersFailed.result).
 
 - The scene travels once per worker: the client scatters the volcl.Scene (its model and packed
   arrays, meshes, volumes and textures included, so files that exist only on the client are
@@ -35,6 +41,10 @@ CLUSTER_ROUND_SECONDS = 4.0
 # Tiles per worker thread the default tile size aims at: fewer than on one machine, since every
 # task costs a few milliseconds of scheduling and transfers.
 CLUSTER_TILES_PER_WORKER = 4
+# A round is at most this many times longer than the one before: more than on one machine
+# (volcl.rounds.ROUND_GROWTH), since the workers built their kernels before the first round
+# and each task costs milliseconds.
+CLUSTER_ROUND_GROWTH = 16
 LOCAL = "local:"
 # Times Dask runs a task again after an exception in it (a worker that dies is handled by Dask
 # itself, which moves the task; `distributed.scheduler.allowed-failures`).
@@ -235,6 +245,7 @@ class DaskExecutor:
     cluster = True              # results name workers (summaries say so)
     tiles_per_worker = CLUSTER_TILES_PER_WORKER
     lookahead = LOOKAHEAD       # 1: each round waits for the one before (benchmarks compare)
+    round_growth = CLUSTER_ROUND_GROWTH
 
     def __init__(self, client):
         self.client = client
@@ -329,7 +340,8 @@ class _Stream:
             if self.target is not None and start >= self.target:
                 return None
             last = self.starts[-1] - self.starts[-2] if len(self.starts) > 1 else 0
-            count = self.render.round_length(self.rate(), last, self.target, self.rules, done=start)
+            count = self.render.round_length(self.rate(), last, self.target, self.rules, done=start,
+                                             growth=self.ex.round_growth)
             self.starts.append(start + count)
             self.held.append([None] * self.n)
         return self.starts[k + 1] - self.starts[k]

@@ -235,15 +235,16 @@ class TiledRender:
             progress(count)
         return rules.reason(self)
 
-    def round_length(self, rate, last, target, rules, done: int | None = None) -> int:
+    def round_length(self, rate, last, target, rules, done: int | None = None, growth: int = ROUND_GROWTH) -> int:
         """Samples per pixel of the round that begins at `done` (default samples_done), after one of
-        `last` samples, at `rate` samples per second of the whole image (None: before any round)."""
+        `last` samples, at `rate` samples per second of the whole image (None: before any round), and
+        at most `growth` times `last`."""
         done = self.samples_done if done is None else done
         first_pass = self.slots - done % self.slots     # what one device's next pass would add
         if rate is None:
             count = first_pass
         else:
-            count = max(1, min(int(rate * self.round_seconds), ROUND_GROWTH * last))
+            count = max(1, min(int(rate * self.round_seconds), growth * last))
             if count >= first_pass:     # end on a whole round of slots: no partial-slot passes
                 count = first_pass + (count - first_pass) // self.slots * self.slots
             left = rules.seconds_left()
