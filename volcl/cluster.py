@@ -39,8 +39,9 @@ from .rounds import TileJob, TiledRender, WorkersFailed
 # workers and back), so rounds are longer than on one machine.
 CLUSTER_ROUND_SECONDS = 4.0
 # Tiles per worker thread the default tile size aims at: fewer than on one machine, since every
-# task costs a few milliseconds of scheduling and transfers.
-CLUSTER_TILES_PER_WORKER = 4
+# task costs a few milliseconds of scheduling and transfers, and larger tiles launch more work at
+# once; the balance at the end comes from the short last rounds (TAIL_SPLIT), not from many tiles.
+CLUSTER_TILES_PER_WORKER = 2
 # A round is at most this many times longer than the one before: more than on one machine
 # (volcl.rounds.ROUND_GROWTH), since the workers built their kernels before the first round
 # and each task costs milliseconds.
@@ -52,6 +53,8 @@ TASK_RETRIES = 2
 # Rounds a tile may run ahead of the image (the rounds every tile has): its look-ahead keeps the
 # workers busy while a round's last tiles render, and bounds the work a stop throws away.
 LOOKAHEAD = 2
+# The render's last rounds are at least this many times shorter than a round (volcl.cluster._Stream).
+TAIL_SPLIT = 8
 # How long the client tries to reach a scheduler at an address.
 CONNECT_SECONDS = 30.0
 # How long a render waits for a first worker to join a scheduler that has none.
@@ -340,11 +343,27 @@ class _Stream:
             if self.target is not None and start >= self.target:
                 return None
             last = self.starts[-1] - self.starts[-2] if len(self.starts) > 1 else 0
-            count = self.render.round_length(self.rate(), last, self.target, self.rules, done=start,
+            rate = self.rate()
+            count = self.render.round_length(rate, last, self.target, self.rules, done=start,
                                              growth=self.ex.round_growth)
+            if rate is not None and count == self.target - start:
+                count = self._tail(count, rate, start)
             self.starts.append(start + count)
             self.held.append([None] * self.n)
         return self.starts[k + 1] - self.starts[k]
+
+    def _tail(self, count: int, rate: float, start: int) -> int:
+        """The render's last rounds halve, down to 1/TAIL_SPLIT of a round's seconds: the tasks a
+        worker may be left alone with at the end are short."""
+        shortest = max(1, int(rate * self.render.round_seconds / TAIL_SPLIT))
+        if count <= shortest:
+            return count
+        half = max(shortest, count // 2)
+        if count - half < shortest:                 # no shorter round after it
+            return count
+        slots = self.render.slots
+        first_pass = slots - start % slots           # whole passes of the slots, as round_length keeps
+        return half if half < first_pass else first_pass + (half - first_pass) // slots * slots
 
     def rate(self) -> float | None:
         """Samples per pixel per second of the whole image on all workers, from the tasks' times."""
