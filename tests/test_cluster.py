@@ -59,6 +59,20 @@ def test_a_cluster_render_has_the_bits_of_a_local_one(client, device):
     assert all(w in remote.metadata["device"] for w in {label.split()[0] for label in remote.shares})
 
 
+def test_local_workers_render_on_their_share_of_the_cores(client):
+    """local:2: each worker process's PoCL device runs on cores / 2 threads (one on 2 cores), not a
+    thread per core in each; a POCL_MAX_PTHREAD_COUNT of the user's wins."""
+    def pocl_threads():
+        import pyopencl as cl
+        units = [d.max_compute_units for p in cl.get_platforms() if "Portable" in p.name for d in p.get_devices()]
+        return os.environ.get("POCL_MAX_PTHREAD_COUNT"), units
+    want = os.environ.get("POCL_MAX_PTHREAD_COUNT") or str(max(1, os.cpu_count() // 2))
+    seen = client.run(pocl_threads)
+    assert len(seen) == 2
+    for threads, units in seen.values():
+        assert threads == want and all(u == int(want) for u in units), seen
+
+
 def test_checkpoints_pass_between_the_cluster_and_one_device(client, device):
     scene = volcl.load_file(SCENES / "cbox.xml", **SIZE)
     whole = volcl.render(scene, spp=40, seed=2, device=device)

@@ -39,9 +39,9 @@ from .rounds import TileJob, TiledRender, WorkersFailed
 # workers and back), so rounds are longer than on one machine.
 CLUSTER_ROUND_SECONDS = 4.0
 # Tiles per worker thread the default tile size aims at: fewer than on one machine, since every
-# task costs a few milliseconds of scheduling and transfers, and larger tiles launch more work at
-# once; the balance at the end comes from the short last rounds (TAIL_SPLIT), not from many tiles.
-CLUSTER_TILES_PER_WORKER = 2
+# task costs a few milliseconds of scheduling and transfers; more than 2, so that the scheduler
+# holds tasks ready for a worker while a finished tile's next round travels through the client.
+CLUSTER_TILES_PER_WORKER = 4
 # A round is at most this many times longer than the one before: more than on one machine
 # (volcl.rounds.ROUND_GROWTH), since the workers built their kernels before the first round
 # and each task costs milliseconds.
