@@ -57,6 +57,9 @@ def test_a_cluster_render_has_the_bits_of_a_local_one(client, device):
     assert {label.split()[0] for label in remote.shares} <= workers
     assert abs(sum(remote.shares.values()) - 1) < 1e-12
     assert all(w in remote.metadata["device"] for w in {label.split()[0] for label in remote.shares})
+    timed = on_cluster(scene, client, seed=6, round_seconds=0.1).render(time_limit=0.5)   # no spp: until the time
+    assert timed.stop_reason == "time" and timed.spp > 0
+    assert same(timed, volcl.render(scene, spp=timed.spp, seed=6, device=device))
 
 
 def test_local_workers_render_on_their_share_of_the_cores(client):

@@ -346,7 +346,7 @@ class _Stream:
             rate = self.rate()
             count = self.render.round_length(rate, last, self.target, self.rules, done=start,
                                              growth=self.ex.round_growth)
-            if rate is not None and count == self.target - start:
+            if rate is not None and self.target is not None and count == self.target - start:
                 count = self._tail(count, rate, start)
             self.starts.append(start + count)
             self.held.append([None] * self.n)
