@@ -396,8 +396,12 @@ class _Stream:
             self.submit(i, 0)
         for f, out in self.ac:
             job = self.jobs.pop(f)
-            if f.status != "finished":
+            if f.status in ("error", "cancelled"):
                 self.failed(f, job, out)
+            if f.status != "finished":          # its result lost with its worker: Dask computes it again
+                self.jobs[f] = job
+                self.ac.add(f)
+                continue
             job.out, job.worker, job.seconds = out["state"], out["worker"], out["seconds"]
             self.cost[job.index] = job.seconds / job.count
             self.held[job.round][job.index] = job
