@@ -57,6 +57,23 @@ def test_a_cluster_render_has_the_bits_of_a_local_one(client, device):
     assert {label.split()[0] for label in remote.shares} <= workers
     assert abs(sum(remote.shares.values()) - 1) < 1e-12
     assert all(w in remote.metadata["device"] for w in {label.split()[0] for label in remote.shares})
+    timed = on_cluster(scene, client, seed=6, round_seconds=0.1).render(time_limit=0.5)   # no spp: until the time
+    assert timed.stop_reason == "time" and timed.spp > 0
+    assert same(timed, volcl.render(scene, spp=timed.spp, seed=6, device=device))
+
+
+def test_local_workers_render_on_their_share_of_the_cores(client):
+    """local:2: each worker process's PoCL device runs on cores / 2 threads (one on 2 cores), not a
+    thread per core in each; a POCL_MAX_PTHREAD_COUNT of the user's wins."""
+    def pocl_threads():
+        import pyopencl as cl
+        units = [d.max_compute_units for p in cl.get_platforms() if "Portable" in p.name for d in p.get_devices()]
+        return os.environ.get("POCL_MAX_PTHREAD_COUNT"), units
+    want = os.environ.get("POCL_MAX_PTHREAD_COUNT") or str(max(1, os.cpu_count() // 2))
+    seen = client.run(pocl_threads)
+    assert len(seen) == 2
+    for threads, units in seen.values():
+        assert threads == want and all(u == int(want) for u in units), seen
 
 
 def test_checkpoints_pass_between_the_cluster_and_one_device(client, device):
@@ -95,6 +112,71 @@ def test_a_worker_killed_mid_render_loses_nothing(client, device):
     result = r.render(60)
     assert seen["killed"] and same(result, local)
     client.wait_for_workers(2, timeout=120)         # the nanny brings the worker back
+
+
+def fail_on_workers(client, tile, from_spp):
+    """Make every try of `tile`'s tasks that start at `from_spp` or later raise, in every worker
+    process (their volcl.cluster._tile_renderer replaced); returns a function that counts those
+    tries and undoes it."""
+    def install():
+        from volcl import cluster as c
+        original = getattr(c._tile_renderer, "original", c._tile_renderer)
+
+        def failing(scene, spec, t, start=0):
+            if t == tile and start >= from_spp:
+                failing.tries += 1
+                raise RuntimeError("injected failure")
+            return original(scene, spec, t, start)
+        failing.original, failing.tries = original, 0
+        c._tile_renderer = failing
+
+    def undo():
+        from volcl import cluster as c
+        tries = getattr(c._tile_renderer, "tries", 0)
+        c._tile_renderer = getattr(c._tile_renderer, "original", c._tile_renderer)
+        return tries
+    client.run(install)
+    return lambda: sum(client.run(undo).values())
+
+
+def test_a_task_failing_on_every_try_stops_the_render_with_its_last_whole_round(client, device, tmp_path):
+    """A tile whose task raises on each of its tries (in the worker processes): WorkersFailed, with
+    the image of the last round every tile has, which is a local render's; the batch renderer
+    writes that image and a checkpoint, and --resume continues to the bits of a whole render."""
+    scene = volcl.load_file(SCENES / "fog.xml", **SIZE)
+    r = on_cluster(scene, client, seed=7)           # rounds: one pass of the slots, then 1 spp each
+    done = r.slots + 2
+    undo = fail_on_workers(client, r.tile_list[-1], done)
+    try:
+        with pytest.raises(cluster.WorkersFailed, match="injected failure") as info:
+            r.render(done + 10)
+    finally:
+        tries = undo()
+    assert tries == 1 + cluster.TASK_RETRIES
+    failed = info.value.result
+    assert failed.stop_reason == "failed" and failed.spp == done and not failed.complete
+    assert same(failed, volcl.render(scene, spp=done, seed=7, device=device))
+    assert any("injected failure" in why for _, why in info.value.failures)
+
+    out = tmp_path / "fog.exr"
+    options = dict(scene_options=SceneOptions(**SIZE), scheduler=client)
+    first = r.slots                                 # the batch's first round: one pass of the slots
+    undo = fail_on_workers(client, r.tile_list[0], first)
+    try:
+        with pytest.raises(volcl.VolclError, match=f"injected failure.*wrote the image of the {first} spp every "
+                                                   f"pixel has to .*continue with --resume"):
+            batch.run([SCENES / "fog.xml"], render=RenderOptions(spp=3 * first, seed=7),
+                      output=OutputOptions(output=out, quiet=True), **options)
+    finally:
+        undo()
+    pixels, attrs = read_image(out)
+    assert attrs["volcl:spp"] == first and attrs["volcl:complete"] == 0
+    assert pixels[..., :3].tobytes() == volcl.render(scene, spp=first, seed=7, device=device).image.tobytes()
+    assert batch.run([SCENES / "fog.xml"], render=RenderOptions(spp=3 * first),
+                     output=OutputOptions(output=out, quiet=True, resume=True), **options) == 0
+    pixels, attrs = read_image(out)
+    assert attrs["volcl:spp"] == 3 * first
+    assert pixels[..., :3].tobytes() == volcl.render(scene, spp=3 * first, seed=7, device=device).image.tobytes()
 
 
 def copy_scene(tmp_path, name, *folders):

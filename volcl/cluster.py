@@ -2,11 +2,17 @@
 
 Dask distributed places the tasks, reruns a task elsewhere when its worker dies, and shows progress;
 volcl supplies the tasks and merges their results. A render is a volcl.rounds.TiledRender whose
-executor is a DaskExecutor: each round's tiles become Dask tasks ("add these samples to this
-tile, starting from this state"), whose results are the tiles' new accumulator states. A task
-depends on nothing but its arguments, so a worker that dies mid-task costs only that task, which
-Dask runs again on another worker, with the same bits; the client holds every tile's state after
-every round, which is what Ctrl-C writes, a checkpoint saves and --resume continues.
+executor is a DaskExecutor: the rounds of tiles of volcl.rounds (every tile adds the same samples
+n .. n + k - 1, and the image is merged and the stop rules checked once every tile has them) become
+Dask tasks ("add these samples to this tile, starting from this state"), whose results are the
+tiles' new accumulator states. The rounds are streamed: a tile's next round is submitted as soon
+as its last one returns (up to LOOKAHEAD rounds ahead of the image, earlier rounds first), so no
+worker waits at the end of a round for the others' last tiles, while the image, merged round by
+round in a fixed order, holds the bits of a local render at every round's end. A task depends on
+nothing but its arguments, so a worker that dies mid-task costs only that task, which Dask runs
+again on another worker, with the same bits; the client holds every tile's state at the image's
+last whole round, which is what Ctrl-C writes, a checkpoint saves and --resume continues, and what
+a render whose task fails on every try keeps (WorkersFailed.result).
 
 - The scene travels once per worker: the client scatters the volcl.Scene (its model and packed
   arrays, meshes, volumes and textures included, so files that exist only on the client are
@@ -33,12 +39,22 @@ from .rounds import TileJob, TiledRender, WorkersFailed
 # workers and back), so rounds are longer than on one machine.
 CLUSTER_ROUND_SECONDS = 4.0
 # Tiles per worker thread the default tile size aims at: fewer than on one machine, since every
-# task costs a few milliseconds of scheduling and transfers.
+# task costs a few milliseconds of scheduling and transfers; more than 2, so that the scheduler
+# holds tasks ready for a worker while a finished tile's next round travels through the client.
 CLUSTER_TILES_PER_WORKER = 4
+# A round is at most this many times longer than the one before: more than on one machine
+# (volcl.rounds.ROUND_GROWTH), since the workers built their kernels before the first round
+# and each task costs milliseconds.
+CLUSTER_ROUND_GROWTH = 16
 LOCAL = "local:"
 # Times Dask runs a task again after an exception in it (a worker that dies is handled by Dask
 # itself, which moves the task; `distributed.scheduler.allowed-failures`).
 TASK_RETRIES = 2
+# Rounds a tile may run ahead of the image (the rounds every tile has): its look-ahead keeps the
+# workers busy while a round's last tiles render, and bounds the work a stop throws away.
+LOOKAHEAD = 2
+# The render's last rounds are at least this many times shorter than a round (volcl.cluster._Stream).
+TAIL_SPLIT = 8
 # How long the client tries to reach a scheduler at an address.
 CONNECT_SECONDS = 30.0
 # How long a render waits for a first worker to join a scheduler that has none.
@@ -75,8 +91,9 @@ def connect(scheduler):
         # they start with SIGINT ignored (inherited), and the client alone decides what to do.
         with _sigint_ignored():
             cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                               dashboard_address=":0", silence_logs=40)
-        client = distributed.Client(cluster)
+                                               dashboard_address=":0", silence_logs=40, env=local_worker_env(n))
+        # Results come straight from the workers, not through the scheduler (which shares this process).
+        client = distributed.Client(cluster, direct_to_workers=True)
         client._volcl_cluster = cluster     # closed with the client (close())
         return client
     try:
@@ -87,6 +104,14 @@ def connect(scheduler):
     except OSError as exc:
         raise VolclError(f"--scheduler {scheduler}: cannot reach the Dask scheduler ({exc}); start one with "
                          "`dask scheduler` and workers with `volcl worker ADDRESS`") from None
+
+
+def local_worker_env(n: int) -> dict:
+    """The environment of `local:N` worker processes: each renders on its share of this machine's
+    cores (PoCL's CPU device would otherwise start a thread per core in every worker, and N
+    workers would fight over the cores); a POCL_MAX_PTHREAD_COUNT set by the user wins."""
+    threads = os.environ.get("POCL_MAX_PTHREAD_COUNT") or str(max(1, (os.cpu_count() or 1) // n))
+    return {"POCL_MAX_PTHREAD_COUNT": threads}
 
 
 @contextlib.contextmanager
@@ -222,8 +247,8 @@ class DaskExecutor:
 
     cluster = True              # results name workers (summaries say so)
     tiles_per_worker = CLUSTER_TILES_PER_WORKER
-
-    WAIT_SECONDS = 0.2      # how often the client wakes while a round runs (signal handlers run then)
+    lookahead = LOOKAHEAD       # 1: each round waits for the one before (benchmarks compare)
+    round_growth = CLUSTER_ROUND_GROWTH
 
     def __init__(self, client):
         self.client = client
@@ -231,7 +256,7 @@ class DaskExecutor:
         self._scene = None          # the scene's future on the workers
         self._spec = None
         self._labels: list = []
-        self._round = 0
+        self._renders = 0
         self._id = f"volcl-{os.getpid()}-{id(self):x}"
 
     @property
@@ -261,43 +286,29 @@ class DaskExecutor:
         self._labels = [str(label) for label in self._wait(futures)]
 
     def _wait(self, futures) -> list:
-        distributed = _import_distributed()
         try:
-            for _ in _as_completed(distributed, futures, self.WAIT_SECONDS):
+            for _ in _import_distributed().as_completed(futures, loop=self.client.loop):  # Ctrl-C is not held
                 pass
         except BaseException:
-            for f in futures:
-                f.cancel()
+            self.client.cancel(futures)
             raise
         return [f.result() for f in futures]
 
-    def run(self, render: TiledRender, jobs: list[TileJob]):
-        distributed = _import_distributed()
-        self._round += 1
-        futures = []
-        for job in jobs:
-            f = self.client.submit(tile_round, self._scene, self._spec, job.tile, job.state_in(), job.count,
-                                   key=f"{self._id}-r{self._round}-t{job.index}", pure=False,
-                                   retries=TASK_RETRIES)
-            futures.append((f, job))
-        by_future = dict(futures)
+    def stream(self, render: TiledRender, target, rules, progress) -> str:
+        """TiledRender.render's rounds, overlapped: a tile's next round is submitted as soon as its
+        last one returns, so no worker waits at the end of a round for the others' last tiles; a
+        round is merged into the image (and the rules checked) once every tile has it. The stop
+        reason; WorkersFailed (with the last whole round) when a task fails on every try."""
+        self._renders += 1
+        run = _Stream(self, render, target, rules, f"{self._id}-{self._renders}")
         try:
-            for f in _as_completed(distributed, [f for f, _ in futures], self.WAIT_SECONDS):
-                job = by_future[f]
-                try:
-                    out = f.result()
-                except Exception as exc:  # noqa: BLE001  (the task failed on every try)
-                    self.failures.append((f"task {f.key}", f"{type(exc).__name__}: {exc}"))
-                    for g, _ in futures:
-                        g.cancel()
-                    raise WorkersFailed(f"tile {job.tile} failed on the cluster ({type(exc).__name__}: {exc})",
-                                        self.failures) from exc
-                job.out, job.worker, job.seconds = out["state"], out["worker"], out["seconds"]
-                render.tile_done(job)
-        except BaseException:
-            for g, _ in futures:
-                g.cancel()
+            return run.go(progress)
+        except WorkersFailed as exc:
+            exc.result = render.result()
+            exc.result.stop_reason = "failed"
             raise
+        finally:
+            run.cancel()
 
     def close(self):
         if self._scene is not None:
@@ -305,15 +316,130 @@ class DaskExecutor:
             self._scene = None
 
 
-def _as_completed(distributed, futures, wake_seconds):
-    """Futures as they finish; the waiting wakes every wake_seconds so that the client's signal
-    handlers run (a blocking wait would hold Ctrl-C until a task ends)."""
-    pending = list(futures)
-    while pending:
-        try:
-            distributed.wait(pending, timeout=wake_seconds, return_when="FIRST_COMPLETED")
-        except TimeoutError:
-            pass
-        done = [f for f in pending if f.done()]
-        pending = [f for f in pending if not f.done()]
-        yield from done
+class _Stream:
+    """The rounds of one render on the cluster: round k adds samples starts[k] .. starts[k + 1] - 1
+    to every tile. Round lengths are decided as the first tile needs them, from the speed the
+    tasks report; tiles run at most LOOKAHEAD rounds ahead of the image (the rounds merged), and
+    earlier rounds have priority, so the image's next round is never starved."""
+
+    def __init__(self, executor: DaskExecutor, render: TiledRender, target, rules, key: str):
+        self.ex, self.render, self.target, self.rules, self.key = executor, render, target, rules, key
+        self.n = len(render.tile_list)
+        self.starts = [render.samples_done]
+        self.held: list[list] = []      # held[k][i]: tile i's TileJob of round k, once rendered
+        self.merged = 0                 # rounds in the image
+        self.waiting: list = []         # (tile, round) held back by LOOKAHEAD
+        self.cost = [0.0] * self.n      # worker seconds per sample of each tile, as last measured
+        # (the client's own loop: the default client may be another one)
+        self.ac = _import_distributed().as_completed(loop=executor.client.loop, with_results=True,
+                                                     raise_errors=False)
+        self.jobs: dict = {}            # future -> TileJob in flight
+        self.t0 = time.perf_counter()
+
+    def count(self, k: int) -> int | None:
+        """Round k's samples per pixel (None: the render ends before round k)."""
+        while len(self.held) <= k:
+            start = self.starts[-1]
+            if self.target is not None and start >= self.target:
+                return None
+            last = self.starts[-1] - self.starts[-2] if len(self.starts) > 1 else 0
+            rate = self.rate()
+            count = self.render.round_length(rate, last, self.target, self.rules, done=start,
+                                             growth=self.ex.round_growth)
+            if rate is not None and self.target is not None and count == self.target - start:
+                count = self._tail(count, rate, start)
+            self.starts.append(start + count)
+            self.held.append([None] * self.n)
+        return self.starts[k + 1] - self.starts[k]
+
+    def _tail(self, count: int, rate: float, start: int) -> int:
+        """The render's last rounds halve, down to 1/TAIL_SPLIT of a round's seconds: the tasks a
+        worker may be left alone with at the end are short."""
+        shortest = max(1, int(rate * self.render.round_seconds / TAIL_SPLIT))
+        if count <= shortest:
+            return count
+        half = max(shortest, count // 2)
+        if count - half < shortest:                 # no shorter round after it
+            return count
+        slots = self.render.slots
+        first_pass = slots - start % slots           # whole passes of the slots, as round_length keeps
+        return half if half < first_pass else first_pass + (half - first_pass) // slots * slots
+
+    def rate(self) -> float | None:
+        """Samples per pixel per second of the whole image on all workers, from the tasks' times."""
+        known = [(c, t.pixels) for c, t in zip(self.cost, self.render.tile_list) if c > 0]
+        if not known:
+            return None
+        per_pixel = sum(c for c, _ in known) / sum(p for _, p in known)
+        seconds = sum(c if c > 0 else per_pixel * t.pixels for c, t in zip(self.cost, self.render.tile_list))
+        return self.ex.size / seconds
+
+    def submit(self, i: int, k: int):
+        """Tile i's round k, from its state at the round's start (the image's, or its round k - 1)."""
+        count = self.count(k)
+        if count is None:
+            return
+        if k - self.merged >= self.ex.lookahead:
+            self.waiting.append((i, k))
+            return
+        job = TileJob(i, self.render.tile_list[i], self.starts[k], count, self.cost[i], self.render)
+        state = None if job.start == 0 else (self.render.tile_state(i) if k == self.merged
+                                             else self.held[k - 1][i].out)
+        f = self.ex.client.submit(tile_round, self.ex._scene, self.ex._spec, job.tile, state, count,
+                                  key=f"{self.key}-r{k}-t{i}", pure=False, retries=TASK_RETRIES, priority=-k)
+        job.round = k
+        self.jobs[f] = job
+        self.ac.add(f)
+
+    def go(self, progress) -> str:
+        for i in range(self.n):
+            self.submit(i, 0)
+        for f, out in self.ac:
+            job = self.jobs.pop(f)
+            if f.status in ("error", "cancelled"):
+                self.failed(f, job, out)
+            if f.status != "finished":          # its result lost with its worker: Dask computes it again
+                self.jobs[f] = job
+                self.ac.add(f)
+                continue
+            job.out, job.worker, job.seconds = out["state"], out["worker"], out["seconds"]
+            self.cost[job.index] = job.seconds / job.count
+            self.held[job.round][job.index] = job
+            self.render.tile_done(job)
+            self.submit(job.index, job.round + 1)
+            while self.merged < len(self.held) and all(self.held[self.merged]):
+                reason = self.merge(progress)
+                if reason is not None:
+                    return reason
+        return "spp"
+
+    def merge(self, progress) -> str | None:
+        """The image's next round, which every tile has; the rules' reason to stop, if any."""
+        k = self.merged
+        jobs, self.held[k] = self.held[k], [True] * self.n     # round k's states go to the image
+        self.render.merge(jobs)
+        now = time.perf_counter()
+        reason = self.render.round_ended(self.starts[k + 1] - self.starts[k], now - self.t0, progress, self.rules)
+        self.t0 = now
+        self.merged += 1
+        if reason is None:
+            waiting, self.waiting = self.waiting, []
+            for i, r in waiting:
+                self.submit(i, r)
+        return reason
+
+    def failed(self, f, job, out):
+        if isinstance(out, BaseException):      # cancelled
+            why = f"{type(out).__name__}: {out}"
+        else:
+            why = f"{out[0].__name__}: {out[1]}"
+        self.ex.failures.append((f"task {f.key}", why))
+        raise WorkersFailed(f"tile {job.tile} failed on the cluster on each of its {1 + TASK_RETRIES} tries ({why})",
+                            self.ex.failures)
+
+    def cancel(self):
+        """Tasks still in flight (the render has stopped, failed or ended) are not wanted."""
+        if self.jobs:
+            self.ex.client.cancel(list(self.jobs))
+        self.jobs.clear()
+        self.ac.clear()

@@ -206,34 +206,45 @@ class TiledRender:
         the last whole round) when no worker is left."""
         target = render_target(self, spp, time_limit, target_error)
         rules = StopRules(time_limit, target_error, min_spp, stop)
-        reason = "spp"
-        rate, last = None, 0
-        while target is None or self.samples_done < target:
-            count = self._round_length(rate, last, target, rules)
-            t0 = time.perf_counter()
-            self._round(count)
-            seconds = time.perf_counter() - t0
-            self.seconds += seconds
-            self.samples_done += count
-            self.rounds += 1
-            rate, last = count / max(seconds, 1e-9), count
-            if progress is not None:
-                progress(count)
-            reason = rules.reason(self) or reason
-            if reason != "spp":
-                break
+        stream = getattr(self.executor, "stream", None)     # an executor that runs rounds overlapped
+        reason = stream(self, target, rules, progress) if stream else self._rounds(target, rules, progress)
         result = self.result()
         result.stop_reason = reason
         return result
 
-    def _round_length(self, rate, last, target, rules) -> int:
-        """Samples per pixel of the next round."""
-        done = self.samples_done
+    def _rounds(self, target, rules, progress) -> str:
+        """Round after round, each begun once the one before has ended; the stop reason."""
+        rate, last = None, 0
+        while target is None or self.samples_done < target:
+            count = self.round_length(rate, last, target, rules)
+            t0 = time.perf_counter()
+            self._round(count)
+            seconds = time.perf_counter() - t0
+            rate, last = count / max(seconds, 1e-9), count
+            reason = self.round_ended(count, seconds, progress, rules)
+            if reason is not None:
+                return reason
+        return "spp"
+
+    def round_ended(self, count: int, seconds: float, progress, rules) -> str | None:
+        """Book a round of `count` samples that took `seconds` and check the rules (its reason to stop)."""
+        self.seconds += seconds
+        self.samples_done += count
+        self.rounds += 1
+        if progress is not None:
+            progress(count)
+        return rules.reason(self)
+
+    def round_length(self, rate, last, target, rules, done: int | None = None, growth: int = ROUND_GROWTH) -> int:
+        """Samples per pixel of the round that begins at `done` (default samples_done), after one of
+        `last` samples, at `rate` samples per second of the whole image (None: before any round), and
+        at most `growth` times `last`."""
+        done = self.samples_done if done is None else done
         first_pass = self.slots - done % self.slots     # what one device's next pass would add
         if rate is None:
             count = first_pass
         else:
-            count = max(1, min(int(rate * self.round_seconds), ROUND_GROWTH * last))
+            count = max(1, min(int(rate * self.round_seconds), growth * last))
             if count >= first_pass:     # end on a whole round of slots: no partial-slot passes
                 count = first_pass + (count - first_pass) // self.slots * self.slots
             left = rules.seconds_left()
@@ -254,11 +265,15 @@ class TiledRender:
             exc.result = self.result()
             exc.result.stop_reason = "failed"
             raise
+        self.merge(jobs)
+
+    def merge(self, jobs: list[TileJob]):
+        """Every tile's part of a round, rendered, into the image (tile order: the bits do not depend on it)."""
         for job in jobs:
             self._put(job)
         for job in jobs:
-            self._cost[job.index] = job.seconds / count
-            self.work[job.worker] = self.work.get(job.worker, 0) + job.tile.pixels * count
+            self._cost[job.index] = job.seconds / job.count
+            self.work[job.worker] = self.work.get(job.worker, 0) + job.tile.pixels * job.count
 
 
 def renderer_for(scene, devices=None, executor=None, seed=None, estimator=None, features=None,
