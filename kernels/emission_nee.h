@@ -21,6 +21,12 @@
 #ifndef VOLCL_EMISSION_NEE_H
 #define VOLCL_EMISSION_NEE_H
 
+/* NEE towards emission exists only where emission does */
+#if VOLCL_HAS_EMISSION_NEE && !VOLCL_HAS_EMISSIVE_MEDIA
+#undef VOLCL_HAS_EMISSION_NEE
+#define VOLCL_HAS_EMISSION_NEE 0
+#endif
+
 /* words of a medium's sampler block (volcl/emission_sampler.py) */
 #define ES_KIND 0
 #define ES_CELLS 1

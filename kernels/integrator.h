@@ -66,9 +66,12 @@ inline int camera_start_medium(const SceneData *sc, float3 *o, float3 d, float *
 /* Fraction of light that travels from o along w for distance t_max: zero if an opaque or refracting
  * surface is in the way, otherwise the product of the transmittances of the media crossed (for
  * heterogeneous media an unbiased ratio-tracking estimate, which draws from rng; tracking cut-offs
- * are counted in *cutoffs). */
+ * are counted in *cutoffs). *end_medium: the medium at the segment's far end; *last_segment: the
+ * length of its last medium segment, from the boundary it entered that medium at (emission NEE). */
 inline float3 shadow_transmittance_to(const SceneData *sc, float3 o, float3 w, float t_max, int medium, Rng *rng,
                                       uint *cutoffs, int *end_medium, float *last_segment) {
+    *end_medium = -2;       /* no medium: the segment was blocked before its end */
+    *last_segment = 0.0f;
 #if VOLCL_HAS_MEDIA || VOLCL_HAS_NULL_BSDF || VOLCL_HAS_MASK || VOLCL_HAS_THINDIELECTRIC
     float3 tr = (float3)(1.0f);
     float t_back = 0.0f;    /* from the boundary just crossed to the offset origin: see integrator_radiance */
