@@ -244,9 +244,12 @@ inline MediumSample medium_grid_sample_distance(const SceneData *sc, __global co
             albedo = medium_grid_albedo(sc, m, o + t * d);
 #if VOLCL_HAS_EMISSION_NEE
             /* MIS against next-event estimation of the same point (emission_nee.h) */
-            float mis_w = emission_collision_weight(sc, em, m, o + t * d, mu);
-            if (mis_w > 0.0f)
-                ms.emission += w * sigma_t * (1.0f - albedo) * medium_grid_radiance(sc, m, o + t * d) * (mis_w / mu);
+            float mis_w = em->on ? emission_collision_weight(sc, em, m, o + t * d, mu) : 1.0f;
+            if (mis_w > 0.0f) {
+                /* off, the same arithmetic as without the feature (the same bits) */
+                float3 e = w * sigma_t * (1.0f - albedo) * medium_grid_radiance(sc, m, o + t * d);
+                ms.emission += (em->on ? e * mis_w : e) / mu;
+            }
 #else
             ms.emission += w * sigma_t * (1.0f - albedo) * medium_grid_radiance(sc, m, o + t * d) / mu;
 #endif
