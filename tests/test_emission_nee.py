@@ -113,9 +113,10 @@ def test_point_sampler_follows_its_target_density(cl_env, test_program, layout):
 
 
 def _target_weights(sc, packed, layout):
-    """The sampler's target, from the scene: homogeneous, one cell; grids, per voxel cell the
-    largest density a lookup in it reads times max(1 - albedo) times the largest blackbody colour
-    any temperature up to the cell's largest one can give."""
+    """The sampler's target, from the scene: homogeneous, one cell; grids, per voxel cell its
+    centre's sigma_a Le plus BOUND_SHARE of its bound: the largest density a lookup in it reads
+    times max(1 - albedo) times the largest blackbody colour any temperature up to the cell's
+    largest one can give."""
     from volcl import blackbody, grids as g
     if layout == "homogeneous":
         return np.ones(1)
@@ -128,11 +129,15 @@ def _target_weights(sc, packed, layout):
     res = density.shape[::-1]
     maj = g.majorant_grid(density[..., None], "trilinear", res).reshape(-1).astype(np.float64)
     t_max = g.majorant_grid(temperature[..., None], "trilinear", res).reshape(-1)
+    # the cells are the voxels: each centre's own emission plus a share of the bound
+    centre = (density.reshape(-1).astype(np.float64) * 0.6 * med.emission_scale
+              * blackbody.table_lookup(temperature.reshape(-1).astype(np.float64)).max(-1))
     t = np.geomspace(blackbody.T_CUTOFF, blackbody.T_MAX, blackbody.TABLE_SIZE)
     prefix = np.maximum.accumulate(blackbody.table().max(1))
     le = np.array([prefix[min(np.searchsorted(t, x * (1 - 1e-6)), len(t) - 1)] if x > blackbody.T_CUTOFF else 0.0
                    for x in t_max])
-    return maj * 0.6 * le * med.emission_scale
+    from volcl.emission_sampler import BOUND_SHARE
+    return centre + BOUND_SHARE * maj * 0.6 * le * med.emission_scale
 
 
 def _pair(layout, device, spp, seed_on, seed_off):

@@ -2,15 +2,18 @@
 upper bound of emission (kernels/emission_nee.h reads them).
 
 Every emissive medium is covered by cells: a heterogeneous medium by the majorant cells of its
-extinction grid (the bricks of a sparse grid), a homogeneous one by a single box, the bounds of the
-shapes it fills. A cell's weight bounds sigma_a * Le over it: the extinction majorant, times a bound
-of max(1 - albedo), times a bound of the radiance, each read over the cell from the grid it comes from
-(its own majorant cells mapped onto the extinction cell, or the grid's largest value where the two
-frames are not axis-aligned to each other). A point is drawn in two steps, a medium by its total
+extinction grid's voxels (up to 64 per axis; the bricks of a large sparse grid), a homogeneous one by a
+single box, the bounds of the shapes it fills. A cell's bound of sigma_a * Le over it is the extinction
+majorant, times a bound of max(1 - albedo), times a bound of the radiance, each read over the cell
+from the grid it comes from (its own cells mapped onto the extinction cell, or the grid's largest
+value where the two frames are not axis-aligned to each other). Where the cells are voxels and the
+grids share them, the weight is sigma_a Le at the voxel's centre plus BOUND_SHARE of the bound (Le
+of a blackbody rises steeply with temperature, so the bound alone over-weights the cool voxels next
+to hot ones); elsewhere it is the bound. A point is drawn in two steps, a medium by its total
 weight (weight times cell volume) and a cell by its weight, then uniformly in the cell; its density
 per unit volume is p_medium * p_cell / cell volume, zero outside the cells.
 
-The bounds only steer the sampling: the estimate divides by the density the kernel samples with, and
+The weights only steer the sampling: the estimate divides by the density the kernel samples with, and
 the path's own collision estimate keeps the full weight wherever that density is zero, so a loose or
 even a wrong bound costs variance, never bias. What must be exact is that density: the CDFs are
 rounded to float32 first and each probability is the difference of the rounded values, which is
@@ -33,6 +36,8 @@ HEADER_WORDS = 31
 # dense grids are sampled by voxel, up to this many cells per axis (at most 2 x 64^3 floats)
 MAX_CELLS_PER_AXIS = 64
 DENSIFY_VOXELS = 128 ** 3
+# where cells are voxels, a cell's weight is its centre's emission plus this share of its bound
+BOUND_SHARE = 0.05
 KIND_BOX, KIND_GRID = 0, 1
 
 
@@ -147,7 +152,41 @@ def _grid_cells(m, rec, desc, majorants) -> tuple[np.ndarray, np.ndarray, tuple]
         maj = np.asarray(majorants, np.float64).reshape(res[::-1])
     g, w = _bound_grid(m.albedo, "one_minus")
     absorb = np.clip(_cells_bound(g, w, to_world, res), 0.0, None)
-    return maj * absorb * _radiance_bound(m, to_world, res), to_world, res
+    bound = maj * absorb * _radiance_bound(m, to_world, res)
+    point = _voxel_emission(m, data, res) if data is not None else None
+    if point is None:
+        return bound, to_world, res
+    # cells centred on voxels: the emission at the voxel centre, which is what a point of the cell
+    # mostly gets, mixed with a share of the bound so that no cell that can emit is left out
+    return point + BOUND_SHARE * bound, to_world, res
+
+
+def _voxel_emission(m, sigma_t, res):
+    """sigma_a Le (largest channel) at the voxel centres where the sampling cells are the extinction
+    grid's voxels and the albedo and emission grids share its frame and voxels; else None."""
+    if tuple(sigma_t.shape[2::-1]) != tuple(res):
+        return None
+
+    def same_frame(v):
+        return (v.kind in ("grid", "sparse") and np.allclose(v.to_world, m.sigma_t.to_world)
+                and _voxels(v) is not None and _voxels(v).shape[:3] == sigma_t.shape[:3])
+    if m.albedo.kind == "const":
+        absorb = float(np.max(1.0 - np.asarray(m.albedo.value, np.float64)))
+    elif same_frame(m.albedo):
+        absorb = (1.0 - np.asarray(_voxels(m.albedo), np.float64)).max(-1)
+    else:
+        return None
+    sig = np.asarray(sigma_t, np.float64).max(-1) * float(m.scale)
+    if m.emission_kind == "none":
+        le = float(np.max(m.radiance))
+    elif not same_frame(m.emission_volume):
+        return None
+    elif m.emission_kind == "radiance":
+        le = abs(float(m.emission_scale)) * np.asarray(_voxels(m.emission_volume), np.float64).max(-1)
+    else:
+        t = (np.asarray(_voxels(m.emission_volume), np.float64)[..., 0] - m.temperature_offset) * m.temperature_scale
+        le = abs(float(m.emission_scale)) * blackbody.table_lookup(t).max(-1)
+    return np.clip(sig * absorb * le, 0.0, None)
 
 
 def _box_cells(packed_medium, box) -> tuple[np.ndarray, np.ndarray, tuple]:
