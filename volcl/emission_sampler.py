@@ -2,7 +2,7 @@
 upper bound of emission (kernels/emission_nee.h reads them).
 
 Every emissive medium is covered by cells: a heterogeneous medium by the majorant cells of its
-extinction grid's voxels (up to 64 per axis; the bricks of a large sparse grid), a homogeneous one by a
+extinction grid's voxels (up to 128 per axis; the bricks of a large sparse grid), a homogeneous one by a
 single box, the bounds of the shapes it fills. A cell's bound of sigma_a * Le over it is the extinction
 majorant, times a bound of max(1 - albedo), times a bound of the radiance, each read over the cell
 from the grid it comes from (its own cells mapped onto the extinction cell, or the grid's largest
@@ -33,8 +33,8 @@ from . import blackbody
 from .grids import majorant_grid, sparse_majorants
 
 HEADER_WORDS = 31
-# dense grids are sampled by voxel, up to this many cells per axis (at most 2 x 64^3 floats)
-MAX_CELLS_PER_AXIS = 64
+# grids are sampled by voxel, up to this many cells per axis (at most 2 x 128^3 floats, 16 MiB)
+MAX_CELLS_PER_AXIS = 128
 DENSIFY_VOXELS = 128 ** 3
 # where cells are voxels, a cell's weight is its centre's emission plus this share of its bound
 BOUND_SHARE = 0.05
