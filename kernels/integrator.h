@@ -66,9 +66,12 @@ inline int camera_start_medium(const SceneData *sc, float3 *o, float3 d, float *
 /* Fraction of light that travels from o along w for distance t_max: zero if an opaque or refracting
  * surface is in the way, otherwise the product of the transmittances of the media crossed (for
  * heterogeneous media an unbiased ratio-tracking estimate, which draws from rng; tracking cut-offs
- * are counted in *cutoffs). */
-inline float3 shadow_transmittance(const SceneData *sc, float3 o, float3 w, float t_max, int medium, Rng *rng,
-                                   uint *cutoffs) {
+ * are counted in *cutoffs). *end_medium: the medium at the segment's far end; *last_segment: the
+ * length of its last medium segment, from the boundary it entered that medium at (emission NEE). */
+inline float3 shadow_transmittance_to(const SceneData *sc, float3 o, float3 w, float t_max, int medium, Rng *rng,
+                                      uint *cutoffs, int *end_medium, float *last_segment) {
+    *end_medium = -2;       /* no medium: the segment was blocked before its end */
+    *last_segment = 0.0f;
 #if VOLCL_HAS_MEDIA || VOLCL_HAS_NULL_BSDF || VOLCL_HAS_MASK || VOLCL_HAS_THINDIELECTRIC
     float3 tr = (float3)(1.0f);
     float t_back = 0.0f;    /* from the boundary just crossed to the offset origin: see integrator_radiance */
@@ -90,7 +93,11 @@ inline float3 shadow_transmittance(const SceneData *sc, float3 o, float3 w, floa
 #if VOLCL_HAS_MEDIA
         if (medium >= 0) tr = medium_attenuate(sc, &sc->media[medium], o - t_back * w, w, seg, tr, rng, cutoffs);
 #endif
-        if (!hit) return tr;
+        if (!hit) {
+            *end_medium = medium;
+            *last_segment = seg;
+            return tr;
+        }
         tr *= passed;
         if (max_component(tr) <= 0.0f) return tr;
         medium = medium_after(sc, &s, w, medium);
@@ -103,9 +110,89 @@ inline float3 shadow_transmittance(const SceneData *sc, float3 o, float3 w, floa
     return (float3)(0.0f);
 #else
     Hit h;
+    *end_medium = medium;
+    *last_segment = t_max;
     return bvh_trace(sc, o, w, t_max, TRACE_ANY, &h) ? (float3)(0.0f) : (float3)(1.0f);
 #endif
 }
+
+/* The same, where the caller does not need to know in which medium the segment ends. */
+inline float3 shadow_transmittance(const SceneData *sc, float3 o, float3 w, float t_max, int medium, Rng *rng,
+                                   uint *cutoffs) {
+    int end_medium;
+    float last_segment;
+    return shadow_transmittance_to(sc, o, w, t_max, medium, rng, cutoffs, &end_medium, &last_segment);
+}
+
+#if VOLCL_HAS_EMISSION_NEE
+/* Whether emission NEE runs in this render (kernels/emission_nee.h). */
+inline bool emission_nee_active(__global const RenderParams *rp) {
+    return rp->emission_nee && rp->emission_table >= 0;
+}
+
+/* sigma_a(y) Le(y), the light medium m emits per unit length at y (y inside its grid for grid media). */
+inline float3 medium_emission_at(const SceneData *sc, __global const Medium *m, float3 y) {
+#if VOLCL_HAS_GRID_MEDIA
+    if (m->type == MEDIUM_HETEROGENEOUS) {
+        __global const GridVolume *v = &sc->grids[m->sigma_t_grid];
+        float3 sigma_t = grid_lookup(sc->grid_data, v, grid_point_to_local(v, y));
+        return sigma_t * (1.0f - medium_grid_albedo(sc, m, y)) * medium_grid_radiance(sc, m, y);
+    }
+#endif
+    return vload_f3(m->emission);
+}
+
+/* Light emitted at ep->y that reaches vertex x (scattering value f towards wi, sampled there with
+ * solid-angle density scatter_pdf), through the shadow ray from `origin` in `medium`, MIS-weighted
+ * against the collision estimate (emission_nee.h). The point counts only if the ray ends in the
+ * medium it was drawn in (a shape may cut a grid's cube, or hold another medium). */
+inline float3 emission_nee_finish(const SceneData *sc, const EmissionPoint *ep, float3 x, float3 wi, float3 f,
+                                  float scatter_pdf, float3 origin, int medium, Rng *rng, uint *cutoffs) {
+    float3 v = ep->y - x;
+    float d2 = dot(v, v);
+    float t_max = dot(ep->y - origin, wi);
+    if (!(d2 > 0.0f) || !(t_max > 0.0f)) return (float3)(0.0f);
+    __global const Medium *m = &sc->media[ep->medium];
+    float3 le = medium_emission_at(sc, m, ep->y);
+    if (!(max_component(le) > 0.0f)) return (float3)(0.0f);
+    int end_medium;
+    float last_segment;
+    float3 tr = shadow_transmittance_to(sc, origin, wi, t_max, medium, rng, cutoffs, &end_medium, &last_segment);
+    if (end_medium != ep->medium || !(max_component(tr) > 0.0f)) return (float3)(0.0f);
+    float w = 1.0f;
+    if (sc->params->mis) {
+        float rate;
+#if VOLCL_HAS_GRID_MEDIA
+        if (m->type == MEDIUM_HETEROGENEOUS) {
+            /* the tracking majorant at y: the cell of the majorant grid holding it (the sampling
+             * cells can be finer) */
+            __global const GridVolume *g = &sc->grids[m->sigma_t_grid];
+            float3 res = convert_float3((int3)(g->maj_res[0], g->maj_res[1], g->maj_res[2]));
+            int3 c = convert_int3(fmin(fmax(floor(grid_point_to_local(g, ep->y) * res), 0.0f), res - 1.0f));
+            rate = sc->grid_data[g->majorants + (c.z * g->maj_res[1] + c.y) * g->maj_res[0] + c.x]
+                   * sc->params->majorant_scale;
+        } else
+#endif
+        rate = medium_landing_density(m, last_segment);
+        w = power_heuristic(ep->pdf, scatter_pdf * rate / d2);
+    }
+    return f * tr * le * (w / (ep->pdf * d2));
+}
+
+/* Draw a point of an emissive medium for a vertex (five uniform numbers, drawn whether or not it
+ * succeeds); false when the draw landed on no emission. */
+inline bool emission_nee_point(const SceneData *sc, Rng *rng, float3 x, EmissionPoint *ep, float3 *wi) {
+    float u_medium = rng_next_float(rng), u_cell = rng_next_float(rng);
+    float2 u01 = rng_next_float2(rng);
+    float3 u = (float3)(u01.x, u01.y, rng_next_float(rng));
+    if (!emission_sample_point(sc, sc->params->emission_table, u_medium, u_cell, u, ep)) return false;
+    float3 v = ep->y - x;
+    float d = length(v);
+    if (!(d > 0.0f)) return false;
+    *wi = v / d;
+    return true;
+}
+#endif
 
 /* Weight of a light found by BSDF or phase sampling (pdf_scatter) that NEE could also have sampled
  * (pdf_light): the power heuristic with MIS on; with NEE alone such hits are NEE's to count (0);
@@ -292,7 +379,19 @@ inline int path_medium_event(const SceneData *sc, Rng *rng, PathState *ps, bool 
     EquiangularSegmentState es = equiangular_begin(sc, rng, m, seg_o, ps->d, seg_t, ps->beta, ps->depth, ps->do_nee);
     ps->L += ps->beta * equiangular_direct(sc, rng, &es, m, ps->medium, cutoffs);
 #endif
-    MediumSample ms = medium_sample(sc, m, seg_o, ps->d, seg_t, ps->beta, rng, cutoffs);
+    EmissionMis em;
+    em.on = false;
+#if VOLCL_HAS_EMISSION_NEE
+    em.on = emission_nee_active(rp) && !ps->specular;
+    em.x = ps->prev_p;
+    em.pdf_dir = ps->prev_pdf;
+#endif
+    MediumSample ms = medium_sample(sc, m, seg_o, ps->d, seg_t, ps->beta, rng, cutoffs, &em);
+#if VOLCL_HAS_EMISSION_NEE
+    /* a homogeneous medium's emission comes from the one collision, at ms.t from the segment's start */
+    if (m->type == MEDIUM_HOMOGENEOUS && ms.scattered)
+        ms.emission *= emission_collision_weight(sc, &em, m, seg_o + ms.t * ps->d, medium_landing_density(m, ms.t));
+#endif
 #if VOLCL_HAS_EMISSIVE_MEDIA
     ps->L += ps->beta * ms.emission;
 #endif
@@ -321,6 +420,17 @@ inline int path_medium_event(const SceneData *sc, Rng *rng, PathState *ps, bool 
             ps->L += ps->beta * c;
         }
     }
+#if VOLCL_HAS_EMISSION_NEE
+    if (emission_nee_active(rp)) {
+        EmissionPoint ep;
+        float3 wi;
+        if (emission_nee_point(sc, rng, p, &ep, &wi)) {
+            float ph_pdf;
+            float ph = phase_eval_pdf(sc, m, ps->d, wi, &ph_pdf);
+            ps->L += ps->beta * emission_nee_finish(sc, &ep, p, wi, (float3)(ph), ph_pdf, p, ps->medium, rng, cutoffs);
+        }
+    }
+#endif
     float3 nd;
     float ph_weight;    /* value / pdf: 1 for every phase sampled exactly */
     ps->prev_pdf = phase_sample(sc, m, ps->d, rng_next_float2(rng), rng, &nd, &ph_weight);
@@ -380,6 +490,20 @@ inline void path_surface_nee(const SceneData *sc, Rng *rng, PathState *ps, const
         rng_next_float(rng);
         rng_next_float2(rng);
     }
+#if VOLCL_HAS_EMISSION_NEE
+    if (!delta && emission_nee_active(sc->params)) {
+        EmissionPoint ep;
+        float3 wi;
+        if (emission_nee_point(sc, rng, s->p, &ep, &wi)) {
+            float pdf;
+            float3 f = bsdf_eval(bsdf, wo, wi, &pdf);
+            if (max_component(f) > 0.0f)
+                ps->L += ps->beta * emission_nee_finish(sc, &ep, s->p, wi, f, pdf,
+                                                        offset_origin(s->p, s->mag, s->ng, wi),
+                                                        medium_after(sc, s, wi, ps->medium), rng, cutoffs);
+        }
+    }
+#endif
 }
 
 /* The ray reached a surface (or escaped): emission found by the last sampled direction, then a

@@ -24,6 +24,8 @@ inline float3 transmittance_exp(float3 sigma, float t) {
 #endif
 }
 
+#include "emission_nee.h"   /* MIS of the emission collected here against NEE towards it */
+
 typedef struct {
     float t;            /* distance of the scattering event, or the segment end when none */
     bool scattered;
@@ -218,7 +220,7 @@ inline int majorant_walk_next(const SceneData *sc, __global const GridVolume *v,
 
 inline MediumSample medium_grid_sample_distance(const SceneData *sc, __global const Medium *m, float3 o,
                                                 float3 d, float t_max, float3 beta, Rng *rng,
-                                                uint *cutoffs) {
+                                                uint *cutoffs, const EmissionMis *em) {
     MediumSample ms;
     ms.t = t_max;
     ms.scattered = false;
@@ -240,7 +242,17 @@ inline MediumSample medium_grid_sample_distance(const SceneData *sc, __global co
 #if VOLCL_HAS_EMISSIVE_MEDIA
         if (emits) {
             albedo = medium_grid_albedo(sc, m, o + t * d);
+#if VOLCL_HAS_EMISSION_NEE
+            /* MIS against next-event estimation of the same point (emission_nee.h) */
+            float mis_w = em->on ? emission_collision_weight(sc, em, m, o + t * d, mu) : 1.0f;
+            if (mis_w > 0.0f) {
+                /* off, the same arithmetic as without the feature (the same bits) */
+                float3 e = w * sigma_t * (1.0f - albedo) * medium_grid_radiance(sc, m, o + t * d);
+                ms.emission += (em->on ? e * mis_w : e) / mu;
+            }
+#else
             ms.emission += w * sigma_t * (1.0f - albedo) * medium_grid_radiance(sc, m, o + t * d) / mu;
+#endif
         }
 #endif
         float3 p = medium_channel_probs(beta * w);
@@ -298,9 +310,9 @@ inline float3 medium_grid_transmittance(const SceneData *sc, __global const Medi
 
 /* Free flight through medium m from o along d, up to t_max (the next surface or the ray's end). */
 inline MediumSample medium_sample(const SceneData *sc, __global const Medium *m, float3 o, float3 d,
-                                  float t_max, float3 beta, Rng *rng, uint *cutoffs) {
+                                  float t_max, float3 beta, Rng *rng, uint *cutoffs, const EmissionMis *em) {
 #if VOLCL_HAS_GRID_MEDIA
-    if (m->type == MEDIUM_HETEROGENEOUS) return medium_grid_sample_distance(sc, m, o, d, t_max, beta, rng, cutoffs);
+    if (m->type == MEDIUM_HETEROGENEOUS) return medium_grid_sample_distance(sc, m, o, d, t_max, beta, rng, cutoffs, em);
 #endif
     float u_channel = rng_next_float(rng);
     return medium_sample_distance(m, t_max, beta, u_channel, rng_next_float(rng));

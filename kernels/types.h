@@ -355,6 +355,9 @@ typedef struct {
     int emitter_samples;    /* direct integrator (direct.h) */
     int bsdf_samples;
     int integrator;         /* INTEGRATOR_* */
+    int emission_table;     /* emission NEE: offset in grid_data of its table of media (volcl/emission_sampler.py), or -1 */
+    int emission_nee;       /* emission NEE on (1) or off (0); read only by VOLCL_HAS_EMISSION_NEE builds */
+    int pad0[2];
 } RenderParams;
 
 #endif

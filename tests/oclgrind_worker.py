@@ -46,6 +46,24 @@ def emissive_media():
     return furnace(0.3, radiance=0.5, medium=medium([1.0, 2.0, 0.5], [0.3, 0.6, 0.0], g=0.4, radiance=0.7))
 
 
+def emission_nee_grid():
+    """Next-event estimation towards a temperature grid (dense) behind a null boundary, from the
+    surfaces of a dark room and from the grid's own scattering vertices."""
+    from scenebuild import box_mesh, grid, hetero_medium
+    from volcl.scene import transform as tf
+    x = (np.arange(6) + 0.5) / 6 * 2 - 1
+    r = np.sqrt(x[:, None, None] ** 2 + x[None, :, None] ** 2 + x[None, None, :] ** 2)
+    to_world = tf.translate([-0.3, -0.6, -0.3]) @ tf.scale([0.6] * 3)
+    med = hetero_medium(grid(np.clip(1.2 - r, 0, None) * 5, to_world), 0.4)
+    med.emission_kind, med.emission_volume = "temperature", grid(np.clip(4000 * (1 - r), 0, None), to_world)
+    med.emission_scale = 4.0
+    v, f = box_mesh(inward=True)
+    bv, bf = box_mesh(0.3, inward=False)
+    shapes = [Shape("mesh", diffuse(0.6), vertices=v, faces=f),
+              Shape("mesh", Bsdf("null"), vertices=bv + [0, -0.3, 0], faces=bf, interior=med)]
+    return scene(shapes, cam=camera(8, 8, fov=70, to_world=tf.translate([0, 0.2, -0.9])))
+
+
 SENSOR = """<sensor type="{kind}">{extra}
     <transform name="to_world"><lookat origin="0, 0.5, 4" target="0, -0.3, 0" up="0, 1, 0"/></transform>
     <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/></film>
@@ -103,7 +121,8 @@ FAMILIES = {
     "chromatic_media": shipped("underwater"),
     "null_boundaries": shipped("smoke_sphere"),
     "camera_in_bounded_medium": shipped("inside_fog"),
-    "emissive_media": emissive_media,
+    "emissive_media": emissive_media,          # homogeneous emission, and NEE towards it (the camera's medium)
+    "emission_nee_grid": emission_nee_grid,
     "grid_media": shipped("smoke_grid"),
     "equiangular": shipped("point_in_fog"),
     "phase_families_mie": shipped("fog_mie"),

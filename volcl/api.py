@@ -101,7 +101,7 @@ def render(scene, spp: int | None = None, seed: int | None = None, device=None, 
                 selectors (the image's tiles go to whichever device is free; the same bits as
                 one device of the same implementation; RenderResult.shares: who did what)
     progress    True for a progress bar, or a callable given the samples per pixel each pass adds
-    estimator   a volcl.Estimator (NEE, MIS, equiangular sampling; default: volcl's defaults)
+    estimator   a volcl.Estimator (NEE, MIS, equiangular sampling, emission NEE; default: volcl's defaults)
     tile        (x, y, width, height) or a volcl.Tile: render only those pixels, all their samples;
                 volcl.merge joins tiles into the image, bit for bit (on one device)
     tile_size   the tiles' size in pixels (one number or (width, height)) of a render on several

@@ -51,7 +51,7 @@ def _on_off(value):
 def _estimator(args):
     from .estimator import Estimator
     return Estimator(nee=_on_off(args.nee), mis=_on_off(args.mis), equiangular=args.equiangular,
-                     equiangular_mis=args.equiangular_mis)
+                     equiangular_mis=args.equiangular_mis, emission_nee=_on_off(args.emission_nee))
 
 
 def cmd_render(args):
@@ -255,6 +255,9 @@ def main(argv=None):
         sp.add_argument("--equiangular-mis", choices=("two", "one"), default="two",
                         help="combine equiangular and distance samples by two-sample (default) or "
                              "one-sample MIS")
+        sp.add_argument("--emission-nee", choices=("on", "off"), default="on",
+                        help="with --nee on: also sample points of emissive media, combined with the "
+                             "collision estimate by MIS (default on; compiled only for scenes with one)")
 
     r = sub.add_parser("render", help="render one or more scenes")
     r.add_argument("scenes", nargs="+", metavar="SCENE")

@@ -22,6 +22,7 @@ class Estimator:
     mis: bool = True            # combine NEE with BSDF / phase sampling (and equiangular with distance) by MIS
     equiangular: str = "auto"   # towards point and spot lights in media: 'on', 'off', or 'auto' (on for such lights inside media)
     equiangular_mis: str = "two"    # samples per segment in the equiangular / distance combination: 'two' or 'one'
+    emission_nee: bool = True   # with nee: also sample points of emissive media (MIS with the collision estimate)
 
     def __post_init__(self):
         if self.equiangular not in EQUIANGULAR_CHOICES:
@@ -53,15 +54,24 @@ class Estimator:
             feats["EQUIANGULAR"] = eq
         else:
             feats["EQUIANGULAR"] = bool(feats.get("EQUIANGULAR", False)) or eq
+        emission = self.uses_emission_nee(detected)
+        feats["EMISSION_NEE"] = emission or (features is not None and bool(feats.get("EMISSION_NEE", False)))
         params = {"nee": int(self.nee), "mis": int(self.mis),
-                  "equiangular": EQUIANGULAR_MODES[self.equiangular_mis] if eq else 0}
+                  "equiangular": EQUIANGULAR_MODES[self.equiangular_mis] if eq else 0,
+                  "emission_nee": int(emission)}
         return feats, params
+
+    def uses_emission_nee(self, detected: dict) -> bool:
+        """Whether this choice samples points of emissive media (next-event estimation towards
+        them): where the scene has an emissive medium, with nee and emission_nee on."""
+        return bool(self.nee and self.emission_nee and detected.get("EMISSION_NEE", False))
 
     def describe(self) -> str:
         eq = self.equiangular
         if self.equiangular == "on":
             eq = f"on ({self.equiangular_mis}-sample MIS)" if self.mis else "on (alone: MIS off)"
-        return f"nee {'on' if self.nee else 'off'}, mis {'on' if self.mis else 'off'}, equiangular {eq}"
+        text = f"nee {'on' if self.nee else 'off'}, mis {'on' if self.mis else 'off'}, equiangular {eq}"
+        return text if self.emission_nee else text + ", emission nee off"
 
 
 # The choices `volcl converge` compares, by name. Each sets every switch so that it means the same in
@@ -73,6 +83,7 @@ CHOICES = {
     "equiangular+mis": Estimator(nee=True, mis=True, equiangular="on", equiangular_mis="two"),
     "equiangular+mis-1s": Estimator(nee=True, mis=True, equiangular="on", equiangular_mis="one"),
     "equiangular-only": Estimator(nee=True, mis=False, equiangular="on"),
+    "mis-no-emission-nee": Estimator(nee=True, mis=True, equiangular="off", emission_nee=False),
 }
 
 
@@ -91,4 +102,6 @@ def applicable_choices(scene: Scene) -> list[str]:
             out.append("bsdf-only")
     if kinds & set(POINT_LIKE) and scene.media:
         out += ["equiangular+mis", "equiangular+mis-1s", "equiangular-only"]
+    if any(m.emissive for m in scene.media):
+        out.append("mis-no-emission-nee")
     return out

@@ -25,6 +25,7 @@ FLAGS = (
     "CHROMATIC_MEDIA",      # a medium whose extinction differs between colour channels
     "HG",                   # an anisotropic (Henyey-Greenstein) phase function
     "EMISSIVE_MEDIA",       # a medium that emits light
+    "EMISSION_NEE",         # next-event estimation towards emissive media (kernels/emission_nee.h)
     "GRID_MEDIA",           # a heterogeneous medium: grid lookups, delta and ratio tracking
     "SPARSE_GRIDS",         # a grid in bricks (OpenVDB / NanoVDB files: kernels/grid.h)
     "EQUIANGULAR",          # equiangular sampling towards point lights in homogeneous media
@@ -95,6 +96,8 @@ def detect(scene: Scene) -> dict[str, bool]:
     f["HG"] = "hg" in phase_kinds
     f["PHASE_FAMILIES"] = "lobes" in phase_kinds
     f["EMISSIVE_MEDIA"] = any(m.emissive for m in media)
+    # the estimator's default (volcl.estimator: on unless switched off); not in the direct integrator
+    f["EMISSION_NEE"] = f["EMISSIVE_MEDIA"] and scene.integrator.kind != "direct"
     f["GRID_MEDIA"] = any(m.kind == "heterogeneous" for m in media)
     f["SPARSE_GRIDS"] = any(isinstance(v, Volume) and v.kind == "sparse" for m in media for v in _volumes_of(m))
     # the estimator's default ('auto'): worth compiling where a point light sits inside a medium

@@ -255,6 +255,15 @@ class GridPacker:
         self.descriptors.append(rec)
         return len(self.descriptors) - 1
 
+    def values(self, offset: int, n: int) -> np.ndarray:
+        """The n floats appended at `offset` (one earlier append)."""
+        at = 0
+        for chunk in self.chunks:
+            if at == offset:
+                return chunk[:n]
+            at += chunk.size
+        raise KeyError(offset)
+
     def add_words(self, words: np.ndarray) -> int:
         """Offset of float32 words appended to grid_data (tables the kernels read beside grids)."""
         return self._append(words)

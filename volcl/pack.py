@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import envmap, layout
+from . import emission_sampler, envmap, layout
 from .bvh_wide import device_bvh, empty_wide
 from .errors import VolclError
 from .features import detect
@@ -99,6 +99,18 @@ def _pack_media(media, grids: GridPacker, phases: PhasePacker):
         if m.radiance is not None:
             r["emission"] = sigma_t * (1.0 - albedo) * m.radiance
     return arr
+
+
+def shape_bounds(s) -> tuple[np.ndarray, np.ndarray]:
+    """World bounds of one shape."""
+    if s.kind == "sphere":
+        c, r = np.asarray(s.center, np.float64), float(s.radius)
+        return c - r, c + r
+    if s.kind == "cylinder":
+        lo, hi = cylinder_bounds(s.cylinder)
+        return np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    v = np.asarray(s.vertices, np.float64)
+    return v.min(0), v.max(0)
 
 
 def _pack_spot(rec, e) -> None:
@@ -460,12 +472,27 @@ class Packer:
         grids = GridPacker(self.majorant_cells)
         phases = PhasePacker()
         media = _pack_media(self.media, grids, phases)
+        self.emission_table = emission_sampler.build(self.media, media, grids.descriptors, grids.values,
+                                                     self._medium_boxes(), grids.add_words)
         grid_desc, grid_data = grids.arrays()
         phase_lobes, phase_tables = phases.arrays()
         self.stats.update(grid_voxels=grids.voxels, majorant_cells=grids.majorant_count, sparse_grids=grids.sparse,
                           phase_table_ratio_error=max(phases.ratio_errors, default=0.0))
         self.arrays.update(media=media, grids=grid_desc, grid_data=grid_data, phase_lobes=phase_lobes,
                            phase_tables=phase_tables)
+
+    def _medium_boxes(self) -> dict:
+        """medium index -> (lo, hi): the bounds of the shapes a homogeneous emissive medium fills, or
+        of the whole scene where no shape names it as interior (the camera's medium, or outside a
+        shape); emission NEE samples points in it (volcl.emission_sampler)."""
+        boxes = {}
+        for i, m in enumerate(self.media):
+            if m.kind != "homogeneous" or not m.emissive:
+                continue
+            inside = [shape_bounds(s) for s in self.scene.shapes if s.interior is m]
+            boxes[i] = ((np.min([b[0] for b in inside], 0), np.max([b[1] for b in inside], 0)) if inside
+                        else self.bounds)
+        return boxes
 
     def _pack_camera(self):
         self.arrays["filter_table"] = filter_table(self.scene.camera.rfilter)
@@ -496,6 +523,8 @@ class Packer:
         params["seed"] = self.scene.seed & 0xFFFFFFFF
         params["nee"], params["mis"] = 1, 1
         params["majorant_scale"] = 1.0
+        params["emission_table"] = getattr(self, "emission_table", -1)
+        params["emission_nee"] = int(params["emission_table"] >= 0)
         lo, hi = self.bounds
         params["scene_center"] = 0.5 * (lo + hi)
         params["scene_radius"] = 0.5 * float(np.linalg.norm(hi - lo))

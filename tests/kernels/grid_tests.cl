@@ -58,12 +58,33 @@ VOLCL_KERNEL void free_flights(SCENE_ARGS, __global const float *rays, __global 
     __global const float *r = rays + 7 * (i % nrays);
     Rng rng = rng_init(seed, (uint)(i % nrays), (uint)(i / nrays));
     uint cut = 0u;
+    EmissionMis em;
+    em.on = false;
     MediumSample ms = medium_sample(&sc, &media[medium], vload3(0, r), vload3(1, r), r[6], (float3)(1.0f),
-                                    &rng, &cut);
+                                    &rng, &cut, &em);
     out[5 * i] = ms.t;
     out[5 * i + 1] = ms.scattered ? 1.0f : 0.0f;
     out[5 * i + 2] = ms.weight.x;
     out[5 * i + 3] = ms.weight.y;
     out[5 * i + 4] = ms.weight.z;
     cutoffs[i] = cut;
+}
+
+/* Emission NEE's point sampler (emission_nee.h): out = y.xyz, the density it was drawn with, the
+ * density emission_point_pdf gives back at y; ids = (medium, cell), or (-1, -1) for a refused draw. */
+VOLCL_KERNEL void emission_points(SCENE_ARGS, __global float *out, __global int *ids, uint seed) {
+    int i = get_global_id(0);
+    SceneData sc = SCENE_INIT;
+    Rng rng = rng_init(seed, (uint)i, 0u);
+    float u_medium = rng_next_float(&rng), u_cell = rng_next_float(&rng);
+    float3 u = (float3)(rng_next_float(&rng), rng_next_float(&rng), rng_next_float(&rng));
+    EmissionPoint ep;
+    bool ok = emission_sample_point(&sc, sc.params->emission_table, u_medium, u_cell, u, &ep);
+    out[5 * i] = ok ? ep.y.x : 0.0f;
+    out[5 * i + 1] = ok ? ep.y.y : 0.0f;
+    out[5 * i + 2] = ok ? ep.y.z : 0.0f;
+    out[5 * i + 3] = ok ? ep.pdf : 0.0f;
+    out[5 * i + 4] = ok ? emission_point_pdf(&sc, &sc.media[ep.medium], ep.y) : 0.0f;
+    ids[2 * i] = ok ? ep.medium : -1;
+    ids[2 * i + 1] = ok ? ep.cell : -1;
 }
