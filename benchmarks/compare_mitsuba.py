@@ -3,8 +3,9 @@
     python benchmarks/compare_mitsuba.py [SCENE.xml ...] [--spp 256] [--variant llvm_ad_rgb]
         [--seeds 0 1] [--out DIR] [--mitsuba-python PATH] [-D name=value ...]
 
-For each scene (default scenes/cbox.xml) it renders two independent images with volcl (seeds
---seeds) and two with Mitsuba 3 (--variant, the same seeds, in a subprocess through the Python
+For each scene (default: DEFAULT_SCENES, the Cornell box, the cloud under an environment map, the
+rough glass holding a medium and the textured Cornell box) it renders two independent images with
+volcl (seeds --seeds) and two with Mitsuba 3 (--variant, the same seeds, in a subprocess through the Python
 that has Mitsuba: --mitsuba-python, $VOLCL_MITSUBA_PYTHON, or this interpreter), all at --spp,
 writes the four EXRs to --out (default: a new temporary folder, kept and printed), and runs the
 shared tool compare_renders.py with Mitsuba's pair as the reference and volcl's as the test.
@@ -38,6 +39,8 @@ import mitsuba_ref  # noqa: E402
 from common import parse_defines  # noqa: E402
 
 DEFAULT_TOOL = ROOT.parent / "shared" / "tools" / "compare_renders.py"
+DEFAULT_SCENES = [ROOT / "scenes" / f"{name}.xml" for name in
+                  ("cbox", "cloud_sky", "rough_glass_medium", "textured_cbox")]
 
 
 def log(msg):
@@ -68,7 +71,9 @@ def render_volcl(scene_path, out, spp, seed, defines, device):
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("scenes", nargs="*", metavar="SCENE", help="scene files (default: scenes/cbox.xml)")
+    p.add_argument("scenes", nargs="*", metavar="SCENE",
+                   help="scene files (default: scenes/cbox.xml, cloud_sky.xml, rough_glass_medium.xml, "
+                        "textured_cbox.xml)")
     p.add_argument("--spp", type=int, default=256)
     p.add_argument("--variant", default=mitsuba_ref.DEFAULT_VARIANT)
     p.add_argument("--seeds", type=int, nargs=2, default=[0, 1], metavar=("SEED0", "SEED1"))
@@ -80,7 +85,7 @@ def main(argv=None):
     mitsuba_ref.add_argument(p)
     args = p.parse_args(argv)
 
-    scenes = [Path(s).resolve() for s in (args.scenes or [ROOT / "scenes" / "cbox.xml"])]
+    scenes = [Path(s).resolve() for s in args.scenes] if args.scenes else DEFAULT_SCENES
     mts = mitsuba_ref.locate(args.mitsuba_python, args.variant, log=print)
     if mts is None:
         print("skipped: Mitsuba 3 not found (pass --mitsuba-python or set $VOLCL_MITSUBA_PYTHON)")

@@ -214,14 +214,20 @@ def main(argv=None):
         log(f"{rel} ...")
         rows.append(report_scene(path, args, mts, tool, out_dir, device))
         log(f"  {rows[-1].verdict or '-'}: {rows[-1].volcl} | {rows[-1].mitsuba} | {rows[-1].agreement}")
-    where = f"Mitsuba {mts['version']} {args.variant}" if mts else "no Mitsuba"
-    header = (f"volcl on {device.key} {device.name} against {where}; {args.spp} spp, seeds {args.seeds[0]} and "
-              f"{args.seeds[1]}, films scaled to at most {args.max_size} px; EXRs in {out_dir}")
-    text = markdown(rows, args.absent, header)
+        if args.markdown:       # the table so far, so that a run stopped early keeps what it finished
+            partial = f"{_header(args, mts, device, out_dir)}; partial: {len(rows)} of {len(files)} files"
+            Path(args.markdown).write_text(markdown(rows, args.absent, partial) + "\n")
+    text = markdown(rows, args.absent, _header(args, mts, device, out_dir))
     print(text)
     if args.markdown:
         Path(args.markdown).write_text(text + "\n")
     return 0
+
+
+def _header(args, mts, device, out_dir) -> str:
+    where = f"Mitsuba {mts['version']} {args.variant}" if mts else "no Mitsuba"
+    return (f"volcl on {device.key} {device.name} against {where}; {args.spp} spp, seeds {args.seeds[0]} and "
+            f"{args.seeds[1]}, films scaled to at most {args.max_size} px; EXRs in {out_dir}")
 
 
 if __name__ == "__main__":

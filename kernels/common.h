@@ -16,11 +16,38 @@
     || !defined(VOLCL_HAS_MEDIUM_BOUNDARIES) || !defined(VOLCL_HAS_CHROMATIC_MEDIA) || !defined(VOLCL_HAS_HG) \
     || !defined(VOLCL_HAS_EMISSIVE_MEDIA) || !defined(VOLCL_HAS_GRID_MEDIA) || !defined(VOLCL_HAS_EQUIANGULAR) \
     || !defined(VOLCL_HAS_CYLINDERS) || !defined(VOLCL_HAS_THINLENS) || !defined(VOLCL_HAS_ORTHOGRAPHIC) \
-    || !defined(VOLCL_HAS_DIRECT)
+    || !defined(VOLCL_HAS_DIRECT) || !defined(VOLCL_HAS_ROUGHCONDUCTOR) || !defined(VOLCL_HAS_ROUGHDIELECTRIC) \
+    || !defined(VOLCL_HAS_PLASTIC) || !defined(VOLCL_HAS_ROUGHPLASTIC) || !defined(VOLCL_HAS_THINDIELECTRIC) \
+    || !defined(VOLCL_HAS_MASK) || !defined(VOLCL_HAS_TEXTURES) || !defined(VOLCL_HAS_BUMP_MAPS) \
+    || !defined(VOLCL_HAS_ENVMAP) || !defined(VOLCL_HAS_SPOT_LIGHTS) || !defined(VOLCL_HAS_PHASE_FAMILIES)
 #error "volcl: every VOLCL_HAS_* feature flag must be defined to 0 or 1 by the host"
 #endif
 
+/* Every kernel entry point is declared VOLCL_KERNEL. Hazard: Intel's CPU OpenCL runtime (2026.2)
+ * miscompiles float3 values passed to or returned from a function it does not inline once its
+ * implicit vectorizer has run on the kernel, even when it then keeps the scalar kernel: each work
+ * item reads another's lanes (tests/test_implementations.py has the six-line reproducer). In the
+ * megakernel that turned a shadow ray's transmittance into another pixel's, run to run. The vector
+ * type hint makes that vectorizer leave the kernel alone (it rejected the divergent megakernel
+ * anyway); the hint is honest, the kernels compute in float3, 4-wide registers, and other
+ * implementations take it as the hint it is. (Building with -DVOLCL_KERNEL=__kernel brings the
+ * failure back: tests/test_implementations.py checks that the self-test then rejects the device.) */
+#ifndef VOLCL_KERNEL
+#define VOLCL_KERNEL __kernel __attribute__((vec_type_hint(float4)))
+#endif
+
 inline float3 vload_f3(const __global float *p) { return (float3)(p[0], p[1], p[2]); }
+
+/* A row-major 3x3 matrix in global memory times v, and its transpose times v. */
+inline float3 mat3_apply(const __global float *m, float3 v) {
+    return (float3)(m[0] * v.x + m[1] * v.y + m[2] * v.z, m[3] * v.x + m[4] * v.y + m[5] * v.z,
+                    m[6] * v.x + m[7] * v.y + m[8] * v.z);
+}
+
+inline float3 mat3_apply_transposed(const __global float *m, float3 v) {
+    return (float3)(m[0] * v.x + m[3] * v.y + m[6] * v.z, m[1] * v.x + m[4] * v.y + m[7] * v.z,
+                    m[2] * v.x + m[5] * v.y + m[8] * v.z);
+}
 
 inline float max_component(float3 v) { return fmax(v.x, fmax(v.y, v.z)); }
 inline float mean_component(float3 v) { return (v.x + v.y + v.z) * (1.0f / 3.0f); }

@@ -20,10 +20,7 @@ inline float3 direct_emission(const SceneData *sc, bool hit, const Hit *h, float
     *pdf_light = 0.0f;
     if (!hit) {
 #if VOLCL_HAS_ENV_LIGHTS
-        if (sc->params->env_light >= 0) {
-            *pdf_light = light_env_pdf(sc);
-            return vload_f3(sc->lights[sc->params->env_light].value);
-        }
+        if (sc->params->env_light >= 0) return light_env_emission(sc, d, pdf_light);
 #endif
         return (float3)(0.0f);
     }
@@ -59,34 +56,31 @@ inline float3 direct_radiance(const SceneData *sc, Rng *rng, float3 o, float3 d,
     if (!hit) return L;
 
     SurfacePoint s = surface_point(sc, &h, o, d);
-    __global const Bsdf *bsdf = &sc->bsdfs[sc->shapes[s.shape].bsdf];
-    float3 ss, ts;
-    make_frame(s.ns, &ss, &ts);
-    float3 wo = frame_to_local(-d, ss, ts, s.ns);
+    BsdfVertex bsdf = bsdf_vertex_at(sc, &h, sc->shapes[s.shape].bsdf, &s, -d);
     float n_e = (float)rp->emitter_samples, n_b = (float)rp->bsdf_samples;
     float frac_e = n_e / (n_e + n_b), frac_b = n_b / (n_e + n_b);
-    uint cutoffs = 0u;      /* no media here: nothing is ever tracked */
-
-    if (!bsdf_is_delta(bsdf) && rp->light_count > 0) {
+    if (bsdf_vertex_smooth(&bsdf) && rp->light_count > 0) {
         for (int i = 0; i < rp->emitter_samples; ++i) {
             LightSample ls;
             float u_pick = rng_next_float(rng);
             float2 ul = rng_next_float2(rng);
             if (!light_sample(sc, s.p, u_pick, ul, &ls) || !(max_component(ls.value) > 0.0f)) continue;
             float pdf_b;
-            float3 f = bsdf_eval(bsdf, wo, frame_to_local(ls.wi, ss, ts, s.ns), &pdf_b);
+            float3 f = bsdf_eval(&bsdf, -d, ls.wi, &pdf_b);
             if (!(max_component(f) > 0.0f)) continue;
+            /* Mitsuba's direct integrator tests visibility: every surface blocks, masks included */
             float t = ls.dist < INFINITY ? ls.dist * 0.9999f : INFINITY;
-            float3 tr = shadow_transmittance(sc, offset_origin(s.p, s.mag, s.ng, ls.wi), ls.wi, t, -1, rng, &cutoffs);
+            Hit blocker;
+            if (bvh_trace(sc, offset_origin(s.p, s.mag, s.ng, ls.wi), ls.wi, t, TRACE_ANY, &blocker)) continue;
             float w = ls.delta ? 1.0f : power_heuristic(ls.pdf * frac_e, pdf_b * frac_b) / n_e;
-            L += f * ls.value * tr * (w / ls.pdf);
+            L += f * ls.value * (w / ls.pdf);
         }
     }
     for (int i = 0; i < rp->bsdf_samples; ++i) {
         BsdfSample bs;
         float u1 = rng_next_float(rng);
-        if (!bsdf_sample(bsdf, wo, u1, rng_next_float2(rng), &bs)) continue;
-        float3 wi = frame_to_world(bs.wi, ss, ts, s.ns);
+        if (!bsdf_sample(&bsdf, -d, u1, rng_next_float2(rng), &bs)) continue;
+        float3 wi = bs.wi;
         float3 origin = offset_origin(s.p, s.mag, s.ng, wi);
         Hit h2;
         bool hit2 = bvh_trace(sc, origin, wi, INFINITY, TRACE_CLOSEST, &h2);

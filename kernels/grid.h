@@ -15,6 +15,10 @@
  * A medium's density is zero outside its extinction grid's cube even though lookups clamp: tracking
  * only runs on the part of a ray inside the cube, which is how Mitsuba 3 bounds a heterogeneous
  * medium (by its sigma_t volume's bounding box). Albedo lookups simply clamp.
+ *
+ * Sparse grids (OpenVDB and NanoVDB files) use the same conventions over a box padded with one
+ * brick of the grid's background on every side (volcl/vdb.py), so clamping at its faces reads the
+ * background, and their values outside the stored bricks are the background, as in OpenVDB.
  */
 #ifndef VOLCL_GRID_H
 #define VOLCL_GRID_H
@@ -39,6 +43,17 @@ inline float3 grid_res(__global const GridVolume *v) {
 
 /* One voxel's value; a one-channel grid is grey. */
 inline float3 grid_voxel(__global const float *data, __global const GridVolume *v, int x, int y, int z) {
+#if VOLCL_HAS_SPARSE_GRIDS
+    if (v->layout == GRID_SPARSE) {
+        /* the brick's index entry: its voxels, or the one value it holds */
+        int nbx = v->res[0] >> 3, nby = v->res[1] >> 3;
+        int e = as_int(data[v->data + ((z >> 3) * nby + (y >> 3)) * nbx + (x >> 3)]);
+        __global const float *at = e >= 0
+            ? data + e + (((z & 7) << 6) | ((y & 7) << 3) | (x & 7)) * v->channels
+            : data + (-1 - e);
+        return v->channels == 1 ? (float3)(at[0]) : vload3(0, at);
+    }
+#endif
     size_t i = ((size_t)z * (size_t)v->res[1] + (size_t)y) * (size_t)v->res[0] + (size_t)x;
     __global const float *base = data + v->data;
     return v->channels == 1 ? (float3)(base[i]) : vload3(i, base);

@@ -69,24 +69,29 @@ inline int camera_start_medium(const SceneData *sc, float3 *o, float3 d, float *
  * are counted in *cutoffs). */
 inline float3 shadow_transmittance(const SceneData *sc, float3 o, float3 w, float t_max, int medium, Rng *rng,
                                    uint *cutoffs) {
-#if VOLCL_HAS_MEDIA || VOLCL_HAS_NULL_BSDF
+#if VOLCL_HAS_MEDIA || VOLCL_HAS_NULL_BSDF || VOLCL_HAS_MASK || VOLCL_HAS_THINDIELECTRIC
     float3 tr = (float3)(1.0f);
     float t_back = 0.0f;    /* from the boundary just crossed to the offset origin: see integrator_radiance */
     for (int i = 0; i < VOLCL_MAX_CROSSINGS; ++i) {
         Hit h;
         bool hit = bvh_trace(sc, o, w, t_max, TRACE_SHADOW, &h);
         SurfacePoint s;
+        float3 passed = (float3)(1.0f);
         if (hit) {
-            /* an opaque surface anywhere on the segment blocks it; the query stops at the first one
-             * it finds, before any medium on the way is estimated */
+            /* an opaque surface anywhere on the segment blocks it: the query stops at the first one
+             * it finds, before any medium on the way is estimated. Null surfaces pass everything,
+             * masks and panes a part (bsdf_vertex.h); the leaf packets mark none of them opaque
+             * (volcl.pack), so the hit is then the nearest on the segment. */
             s = surface_point(sc, &h, o, w);
-            if (sc->bsdfs[sc->shapes[s.shape].bsdf].type != BSDF_NULL) return (float3)(0.0f);
+            passed = surface_null_transmission(sc, &h, &s, w);
+            if (!(max_component(passed) > 0.0f)) return (float3)(0.0f);
         }
         float seg = (hit ? h.t : t_max) + t_back;
 #if VOLCL_HAS_MEDIA
         if (medium >= 0) tr = medium_attenuate(sc, &sc->media[medium], o - t_back * w, w, seg, tr, rng, cutoffs);
 #endif
         if (!hit) return tr;
+        tr *= passed;
         if (max_component(tr) <= 0.0f) return tr;
         medium = medium_after(sc, &s, w, medium);
         float3 next = offset_origin(s.p, s.mag, s.ng, w);
@@ -124,12 +129,13 @@ inline float3 nee_contribution(const SceneData *sc, const LightSample *ls, float
 }
 
 #if VOLCL_HAS_EQUIANGULAR
-/* Point lights in homogeneous media: equiangular sampling (equiangular.h) combined with free-flight
- * distance sampling by multiple importance sampling.
+/* Point and spot lights in homogeneous media: equiangular sampling (equiangular.h) combined with
+ * free-flight distance sampling by multiple importance sampling.
  *
  * On a medium segment o + t d, t in [0, t_seg], that a path with throughput beta enters, the light of
  * point light k scattered once towards the path is
- *     D_k = integral over [0, t_seg] of Tr(t) sigma_s phase(t) Tr_shadow(t) I_k / dist_k(t)^2 dt.
+ *     D_k = integral over [0, t_seg] of Tr(t) sigma_s phase(t) Tr_shadow(t) I_k(t) / dist_k(t)^2 dt
+ * (I_k(t): the intensity towards o + t d, a spot's falloff included).
  * Two techniques estimate it:
  *   - distance: the path's own free-flight sample t_d, density p_d (media.h; the mixture over colour
  *     channels for chromatic extinction; it lands inside the segment only with probability
@@ -182,7 +188,7 @@ inline float equiangular_weight(int tech, int mis, float pdf_e, float pdf_d) {
 /* weight of NEE towards a point light from the distance-sampled vertex at t */
 inline float equiangular_distance_weight(const SceneData *sc, const EquiangularSegmentState *es,
                                          __global const Medium *m, const LightSample *ls, float t) {
-    if (es->tech == EQ_NONE || sc->lights[ls->light].type != LIGHT_POINT) return 1.0f;
+    if (es->tech == EQ_NONE || !light_is_point_like(sc->lights[ls->light].type)) return 1.0f;
     if (es->tech == EQ_ONLY_EQUIANGULAR) return 0.0f;
     float pdf_e = sample_equiangular_pdf(es->o, es->d, es->t_seg, vload_f3(sc->lights[ls->light].position), t);
     float pdf_d = medium_distance_pdf(m, es->beta, t);
@@ -221,7 +227,7 @@ inline float3 equiangular_direct(const SceneData *sc, Rng *rng, const Equiangula
     float u = rng_next_float(rng);
     int li = min((int)(u_pick * (float)count), count - 1);
     __global const Light *l = &sc->lights[li];
-    if (l->type != LIGHT_POINT) return (float3)(0.0f);   /* other lights: NEE at the distance sample */
+    if (!light_is_point_like(l->type)) return (float3)(0.0f);   /* other lights: NEE at the distance sample */
     float3 lp = vload_f3(l->position);
     float t, pdf_e;
     if (!sample_equiangular(es->o, es->d, es->t_seg, lp, u, &t, &pdf_e)) return (float3)(0.0f);
@@ -237,8 +243,8 @@ inline float3 equiangular_direct(const SceneData *sc, Rng *rng, const Equiangula
     if (max_component(tr_shadow) <= 0.0f) return (float3)(0.0f);
     float3 sigma_t = vload_f3(m->sigma_t);
     float3 sigma_s = sigma_t * vload_f3(m->albedo);
-    float ph = phase_eval(m, es->d, wi);
-    return transmittance_exp(sigma_t, t) * sigma_s * tr_shadow * vload_f3(l->value)
+    float ph = phase_eval(sc, m, es->d, wi);
+    return transmittance_exp(sigma_t, t) * sigma_s * tr_shadow * light_point_emission(sc, l, -wi)
            * (ph * w * (float)count / (pdf_e * d2));
 }
 #endif
@@ -305,8 +311,10 @@ inline int path_medium_event(const SceneData *sc, Rng *rng, PathState *ps, bool 
         float u_pick = rng_next_float(rng);
         float2 ul = rng_next_float2(rng);
         if (light_sample(sc, p, u_pick, ul, &ls) && max_component(ls.value) > 0.0f) {
-            float ph = phase_eval(m, ps->d, ls.wi);
-            float3 c = nee_contribution(sc, &ls, (float3)(ph), ph, p, ps->medium, rng, cutoffs);
+            /* the phase value in the estimate, the phase sampler's pdf in the MIS weight */
+            float ph_pdf;
+            float ph = phase_eval_pdf(sc, m, ps->d, ls.wi, &ph_pdf);
+            float3 c = nee_contribution(sc, &ls, (float3)(ph), ph_pdf, p, ps->medium, rng, cutoffs);
 #if VOLCL_HAS_EQUIANGULAR
             c *= equiangular_distance_weight(sc, &es, m, &ls, ms.t);
 #endif
@@ -314,7 +322,9 @@ inline int path_medium_event(const SceneData *sc, Rng *rng, PathState *ps, bool 
         }
     }
     float3 nd;
-    ps->prev_pdf = phase_sample(m, ps->d, rng_next_float2(rng), &nd);
+    float ph_weight;    /* value / pdf: 1 for every phase sampled exactly */
+    ps->prev_pdf = phase_sample(sc, m, ps->d, rng_next_float2(rng), rng, &nd, &ph_weight);
+    ps->beta *= ph_weight;
     ps->specular = false;
     ps->prev_p = p;
     ps->o = p;
@@ -333,8 +343,10 @@ inline void path_escape(const SceneData *sc, PathState *ps) {
 #if VOLCL_HAS_ENV_LIGHTS
     __global const RenderParams *rp = sc->params;
     if (rp->env_light >= 0 && !(rp->hide_emitters && ps->depth == 0)) {
-        float w = ps->specular ? 1.0f : hit_weight(rp, ps->prev_pdf, light_env_pdf(sc));
-        ps->L += ps->beta * vload_f3(sc->lights[rp->env_light].value) * w;
+        float pdf_light;
+        float3 le = light_env_emission(sc, ps->d, &pdf_light);
+        float w = ps->specular ? 1.0f : hit_weight(rp, ps->prev_pdf, pdf_light);
+        ps->L += ps->beta * le * w;
     }
 #endif
 }
@@ -351,14 +363,14 @@ inline void path_null_crossing(const SceneData *sc, PathState *ps, const Surface
 /* Next-event estimation at a surface vertex, MIS against BSDF sampling. Delta BSDFs draw the same
  * random numbers without using them, so the sequence stays aligned whatever the vertex type. */
 inline void path_surface_nee(const SceneData *sc, Rng *rng, PathState *ps, const SurfacePoint *s,
-                             __global const Bsdf *bsdf, float3 wo, float3 ss, float3 ts, bool delta, uint *cutoffs) {
+                             const BsdfVertex *bsdf, float3 wo, bool delta, uint *cutoffs) {
     if (ps->do_nee && !delta) {
         LightSample ls;
         float u_pick = rng_next_float(rng);
         float2 ul = rng_next_float2(rng);
         if (light_sample(sc, s->p, u_pick, ul, &ls) && max_component(ls.value) > 0.0f) {
             float pdf;
-            float3 f = bsdf_eval(bsdf, wo, frame_to_local(ls.wi, ss, ts, s->ns), &pdf);
+            float3 f = bsdf_eval(bsdf, wo, ls.wi, &pdf);
             if (max_component(f) > 0.0f) {
                 ps->L += ps->beta * nee_contribution(sc, &ls, f, pdf, offset_origin(s->p, s->mag, s->ng, ls.wi),
                                                      medium_after(sc, s, ls.wi, ps->medium), rng, cutoffs);
@@ -406,23 +418,30 @@ inline int path_surface_event(const SceneData *sc, Rng *rng, PathState *ps, bool
         return PATH_CROSSED;
     }
 #endif
-    if (rp->max_depth >= 0 && ps->depth + 1 >= rp->max_depth) return PATH_END;
+    /* at the depth limit a path still passes through masks and panes: Mitsuba's null events are
+     * no bounce */
+    bool at_limit = rp->max_depth >= 0 && ps->depth + 1 >= rp->max_depth;
+    if (at_limit && !(bsdf->flags & BSDF_FLAG_PASSES)) return PATH_END;
 
-    float3 ss, ts;
-    make_frame(s.ns, &ss, &ts);
-    float3 wo = frame_to_local(wo_world, ss, ts, s.ns);
-    bool delta = bsdf_is_delta(bsdf);
-    path_surface_nee(sc, rng, ps, &s, bsdf, wo, ss, ts, delta, cutoffs);
+    BsdfVertex bv = bsdf_vertex_at(sc, h, shape->bsdf, &s, wo_world);
+    bool delta = !bsdf_vertex_smooth(&bv);
+    if (!at_limit) path_surface_nee(sc, rng, ps, &s, &bv, wo_world, delta, cutoffs);
     if (rp->specular_chains_only && !delta) return PATH_END;
 
     BsdfSample bs;
     float u1 = rng_next_float(rng);
-    if (!bsdf_sample(bsdf, wo, u1, rng_next_float2(rng), &bs)) return PATH_END;
+    if (!bsdf_sample(&bv, wo_world, u1, rng_next_float2(rng), &bs)) return PATH_END;
+    if (bs.null_event) {
+        ps->beta *= bs.weight;
+        path_null_crossing(sc, ps, &s);
+        return PATH_CROSSED;
+    }
+    if (at_limit) return PATH_END;
     /* As in Mitsuba, a direction that a shading normal sends to the other side of the geometric
      * surface than its own hemisphere is followed there: the medium and the ray's offset follow the
      * side it leaves on (geometric normal); ending such paths darkened dielectric boundaries by up
      * to 2% at grazing angles against Mitsuba. */
-    float3 wi = frame_to_world(bs.wi, ss, ts, s.ns);
+    float3 wi = bs.wi;
     ps->beta *= bs.weight;
     ps->eta_scale *= bs.eta * bs.eta;
     ps->specular = bs.delta;

@@ -1,10 +1,14 @@
 /* Light sampling and the pdfs that multiple importance sampling needs.
  * A light is chosen uniformly; pdfs include that choice and are per unit solid angle at the
- * receiving point, except for delta lights (point, directional), whose pdf is the choice
- * probability alone. Area lights emit on the side their shading normal faces.
+ * receiving point, except for delta lights (point, spot, directional), whose pdf is the choice
+ * probability alone. Area lights emit on the side their shading normal faces. The environment (a
+ * constant or an envmap, at most one: RenderParams.env_light) is at infinity.
  */
 #ifndef VOLCL_LIGHTS_H
 #define VOLCL_LIGHTS_H
+
+#include "envmap.h"
+#include "textures.h"
 
 typedef struct {
     float3 wi;      /* unit direction from the receiving point towards the light */
@@ -24,7 +28,68 @@ inline float light_area_pdf(const SceneData *sc, int li, float3 ref, float3 p, f
     return d2 / (cos_l * sc->lights[li].area * (float)sc->params->light_count);
 }
 
-inline float light_env_pdf(const SceneData *sc) { return VOLCL_INV_4PI / (float)sc->params->light_count; }
+/* Radiance arriving from the environment along world direction `d` (a ray leaving the scene), and
+ * in *pdf the density with which light sampling (the choice of the light included) draws d. */
+inline float3 light_env_emission(const SceneData *sc, float3 d, float *pdf) {
+    __global const Light *l = &sc->lights[sc->params->env_light];
+    float count = (float)sc->params->light_count;
+#if VOLCL_HAS_ENVMAP
+    if (l->type == LIGHT_ENVMAP) {
+        float3 le = envmap_eval(sc, l, d, pdf);
+        *pdf /= count;
+        return le;
+    }
+#endif
+    *pdf = VOLCL_INV_4PI / count;
+    return vload_f3(l->value);
+}
+
+/* Mitsuba's spot falloff towards `w` in the light's frame (not necessarily unit): 1 inside the beam
+ * width, falling linearly in angle to 0 at the cutoff angle, 0 beyond. A beam width above the cutoff
+ * makes a hard-edged cone of the cutoff angle, as in Mitsuba (whose assertion on it is in debug
+ * builds only). */
+inline float spot_falloff(__global const Light *l, float3 w) {
+    float cos_t = normalize(w).z;
+    if (!(cos_t > l->cos_cutoff)) return 0.0f;
+    if (cos_t >= l->cos_beam) return 1.0f;
+    return (l->cutoff - acos(cos_t)) * l->inv_transition;
+}
+
+/* Lights at a point (point and spot): sampled from any point, equiangular sampling in media too. */
+inline bool light_is_point_like(int type) { return type == LIGHT_POINT || type == LIGHT_SPOT; }
+
+/* Intensity (W/sr) of a point or spot light towards unit world direction `w` (pointing away from it). */
+inline float3 light_point_intensity(__global const Light *l, float3 w) {
+    float3 intensity = vload_f3(l->value);
+#if VOLCL_HAS_SPOT_LIGHTS
+    if (l->type == LIGHT_SPOT) return intensity * spot_falloff(l, mat3_apply(l->to_local, w));
+#endif
+    return intensity;
+}
+
+/* Mitsuba's spot texture coordinates of light-frame direction `wl` (not necessarily unit): the
+ * cone's cross-section at z = 1 mapped onto the unit square, so that the cutoff circle touches
+ * its edges. */
+inline float2 spot_texture_uv(__global const Light *l, float3 wl) {
+    float f = 0.5f / (wl.z * l->tan_cutoff);
+    return (float2)(0.5f + wl.x * f, 0.5f + wl.y * f);
+}
+
+/* What a point or spot light sends towards unit world direction `w`: its intensity, a spot's falloff
+ * and projection texture included. */
+inline float3 light_point_emission(const SceneData *sc, __global const Light *l, float3 w) {
+#if VOLCL_HAS_SPOT_LIGHTS && VOLCL_HAS_TEXTURES
+    if (l->type == LIGHT_SPOT && l->texture >= 0) {
+        float3 wl = mat3_apply(l->to_local, w);
+        float falloff = spot_falloff(l, wl);
+        /* beyond the cutoff the light is dark and the texture never looked up, as in Mitsuba */
+        if (falloff <= 0.0f) return (float3)(0.0f);
+        return vload_f3(l->value) * falloff
+               * texture_eval3(sc, l->texture, (float3)(1.0f), spot_texture_uv(l, wl));
+    }
+#endif
+    return light_point_intensity(l, w);
+}
 
 /* Emitted radiance towards `w` (pointing away from the light) from a point with shading normal ns. */
 inline float3 light_area_emission(__global const Light *l, float3 ns, float3 w) {
@@ -94,14 +159,14 @@ inline bool light_sample(const SceneData *sc, float3 ref, float u_pick, float2 u
         return true;
     }
 #endif
-#if VOLCL_HAS_POINT_LIGHTS
-    if (l->type == LIGHT_POINT) {
+#if VOLCL_HAS_POINT_LIGHTS || VOLCL_HAS_SPOT_LIGHTS
+    if (light_is_point_like(l->type)) {
         float3 v = vload_f3(l->position) - ref;
         float d2 = dot(v, v);
         if (!(d2 > 0.0f)) return false;
         ls->dist = sqrt(d2);
         ls->wi = v / ls->dist;
-        ls->value = vload_f3(l->value) / d2;
+        ls->value = light_point_emission(sc, l, -ls->wi) / d2;
         ls->pdf = choice;
         ls->delta = true;
         return true;
@@ -123,6 +188,14 @@ inline bool light_sample(const SceneData *sc, float3 ref, float u_pick, float2 u
         ls->dist = INFINITY;
         ls->value = vload_f3(l->value);
         ls->pdf = choice * VOLCL_INV_4PI;
+        return true;
+    }
+#endif
+#if VOLCL_HAS_ENVMAP
+    if (l->type == LIGHT_ENVMAP) {
+        if (!envmap_sample(sc, l, u, &ls->wi, &ls->value, &ls->pdf)) return false;
+        ls->dist = INFINITY;
+        ls->pdf *= choice;
         return true;
     }
 #endif

@@ -125,6 +125,35 @@ inline float3 medium_grid_albedo(const SceneData *sc, __global const Medium *m, 
     return grid_lookup(sc->grid_data, v, grid_point_to_local(v, p));
 }
 
+#if VOLCL_HAS_EMISSIVE_MEDIA
+/* The normalized blackbody's linear sRGB colour at temperature t (kelvin): the table at
+ * grid_data[at] (t_min, log(t_max / t_min), size, then size colours evenly spaced in log t),
+ * interpolated linearly; nothing at or below t_min (volcl/blackbody.py). */
+inline float3 blackbody_rgb(__global const float *data, int at, float t) {
+    __global const float *tab = data + at;
+    if (!(t > tab[0])) return (float3)(0.0f);
+    float n = tab[2];
+    float x = fmin(log(t / tab[0]) / tab[1] * (n - 1.0f), n - 1.0f);
+    int i = min((int)x, (int)n - 2);
+    float w = x - (float)i;
+    return mix(vload3((size_t)i, tab + 3), vload3((size_t)i + 1, tab + 3), w);   /* i >= 0: t > t_min */
+}
+
+/* The radiance Le(p) of a heterogeneous medium (it emits sigma_a(p) Le(p) per unit length). */
+inline float3 medium_grid_radiance(const SceneData *sc, __global const Medium *m, float3 p) {
+    if (m->emission_mode == EMISSION_CONSTANT) return vload_f3(m->emission);
+    __global const GridVolume *v = &sc->grids[m->emission_grid];
+    float3 value = grid_lookup(sc->grid_data, v, grid_point_to_local(v, p));
+    if (m->emission_mode == EMISSION_RADIANCE) return m->emission_scale * value;
+    float t = (value.x - m->temperature_offset) * m->temperature_scale;
+    return m->emission_scale * blackbody_rgb(sc->grid_data, m->blackbody, t);
+}
+
+inline bool medium_emits(__global const Medium *m) {
+    return m->emission_mode != EMISSION_CONSTANT || max_component(vload_f3(m->emission)) > 0.0f;
+}
+#endif
+
 /* Exponential optical depth to the next tentative collision (u < 1, so always finite). */
 inline float medium_sample_tau(Rng *rng) { return -log1p(-rng_next_float(rng)); }
 
@@ -199,8 +228,7 @@ inline MediumSample medium_grid_sample_distance(const SceneData *sc, __global co
     MajorantWalk walk;
     if (!majorant_walk_begin(sc, v, o, d, t_max, rng, &walk)) return ms;
 #if VOLCL_HAS_EMISSIVE_MEDIA
-    float3 le = vload_f3(m->emission);
-    bool emits = max_component(le) > 0.0f;
+    bool emits = medium_emits(m);
 #endif
     float3 w = (float3)(1.0f);      /* weight of the null collisions so far */
     float t, mu;
@@ -212,7 +240,7 @@ inline MediumSample medium_grid_sample_distance(const SceneData *sc, __global co
 #if VOLCL_HAS_EMISSIVE_MEDIA
         if (emits) {
             albedo = medium_grid_albedo(sc, m, o + t * d);
-            ms.emission += w * sigma_t * (1.0f - albedo) * le / mu;
+            ms.emission += w * sigma_t * (1.0f - albedo) * medium_grid_radiance(sc, m, o + t * d) / mu;
         }
 #endif
         float3 p = medium_channel_probs(beta * w);

@@ -1,6 +1,15 @@
 /* Phase functions. Convention: the angle is the one between the travel directions before and after
- * scattering (d_in, d_out), so g > 0 scatters forward. Values are per unit solid angle and equal the
- * sampling pdf (both phase functions are sampled exactly).
+ * scattering (d_in, d_out), so g > 0 scatters forward. Values are per unit solid angle.
+ *
+ * The interface the integrator uses:
+ *   phase_eval_pdf(sc, m, d_in, d_out, &pdf): the phase value towards d_out, and the pdf with which
+ *       phase_sample would have chosen d_out (for MIS weights);
+ *   phase_sample(sc, m, d_in, u, rng, &d_out, &weight): a new direction, its pdf (returned), and
+ *       weight = value / pdf, the factor for the path throughput.
+ * Every phase function but Fournier-Forand is sampled exactly (pdf = value, weight = 1); the
+ * Fournier-Forand sampler is a table whose pdf differs from the value (phase_families.h).
+ * Isotropic and HG live in the Medium record; everything else is a mixture of lobes
+ * (PHASE_LOBES, compiled only with VOLCL_HAS_PHASE_FAMILIES, phase_families.h).
  *
  * Henyey-Greenstein for every float g in (-1, 1), with no clamp of g. The lobe is carried as its
  * distance from the peak, w = 1 - cos(angle to the peak) (the peak is d_in for g >= 0, -d_in for
@@ -33,29 +42,60 @@ inline float phase_hg_sample_w(float ag, float u) {
     return clamp(w, 0.0f, 2.0f);
 }
 
-inline float phase_eval(__global const Medium *m, float3 d_in, float3 d_out) {
+/* The unit direction at distance w = 1 - cos from the unit vector `peak`, at azimuth 2 pi u. */
+inline float3 phase_direction_at(float3 peak, float w, float u) {
+    float sn = sqrt(fmax(0.0f, w * (2.0f - w)));
+    /* native trig: only the azimuth, any angle error is a rotation about the peak */
+    float cp = native_cos(2.0f * VOLCL_PI * u), sp = native_sin(2.0f * VOLCL_PI * u);
+    float3 s, t;
+    make_frame(peak, &s, &t);
+    return normalize(frame_to_world((float3)(sn * cp, sn * sp, 1.0f - w), s, t, peak));
+}
+
+inline float phase_hg_eval_dirs(float g, float3 d_in, float3 d_out) {
+    float3 gap = g >= 0.0f ? d_in - d_out : d_in + d_out;
+    return phase_hg_eval_w(g, 0.5f * dot(gap, gap));
+}
+
+#if VOLCL_HAS_PHASE_FAMILIES
+#include "phase_families.h"
+#endif
+
+/* The phase value towards d_out; *pdf: the density phase_sample gives d_out. */
+inline float phase_eval_pdf(const SceneData *sc, __global const Medium *m, float3 d_in, float3 d_out,
+                            float *pdf) {
+#if VOLCL_HAS_PHASE_FAMILIES
+    if (m->phase == PHASE_LOBES) return phase_lobes_eval(sc, m, d_in, d_out, pdf);
+#endif
 #if VOLCL_HAS_HG
     if (m->phase == PHASE_HG) {
-        float3 gap = m->g >= 0.0f ? d_in - d_out : d_in + d_out;
-        return phase_hg_eval_w(m->g, 0.5f * dot(gap, gap));
+        float v = phase_hg_eval_dirs(m->g, d_in, d_out);
+        *pdf = v;
+        return v;
     }
 #endif
+    *pdf = VOLCL_INV_4PI;
     return VOLCL_INV_4PI;
 }
 
-/* New travel direction after scattering from d_in; returns the pdf (= phase value). */
-inline float phase_sample(__global const Medium *m, float3 d_in, float2 u, float3 *d_out) {
+inline float phase_eval(const SceneData *sc, __global const Medium *m, float3 d_in, float3 d_out) {
+    float pdf;
+    return phase_eval_pdf(sc, m, d_in, d_out, &pdf);
+}
+
+/* New travel direction after scattering from d_in, from the uniform pair u (and, for phase
+ * functions that need more random numbers, rng); returns its pdf, *weight = value / pdf. */
+inline float phase_sample(const SceneData *sc, __global const Medium *m, float3 d_in, float2 u, Rng *rng,
+                          float3 *d_out, float *weight) {
+#if VOLCL_HAS_PHASE_FAMILIES
+    if (m->phase == PHASE_LOBES) return phase_lobes_sample(sc, m, d_in, u, rng, d_out, weight);
+#endif
+    *weight = 1.0f;
 #if VOLCL_HAS_HG
     if (m->phase == PHASE_HG) {
         float3 peak = m->g >= 0.0f ? d_in : -d_in;
-        float w = phase_hg_sample_w(fabs(m->g), u.x);
-        float sn = sqrt(fmax(0.0f, w * (2.0f - w)));
-        /* native trig: only the azimuth, any angle error is a rotation about the peak */
-        float cp = native_cos(2.0f * VOLCL_PI * u.y), sp = native_sin(2.0f * VOLCL_PI * u.y);
-        float3 s, t;
-        make_frame(peak, &s, &t);
-        *d_out = normalize(frame_to_world((float3)(sn * cp, sn * sp, 1.0f - w), s, t, peak));
-        return phase_eval(m, d_in, *d_out);
+        *d_out = phase_direction_at(peak, phase_hg_sample_w(fabs(m->g), u.x), u.y);
+        return phase_hg_eval_dirs(m->g, d_in, *d_out);
     }
 #endif
     *d_out = sample_uniform_sphere(u);

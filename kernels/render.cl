@@ -28,27 +28,32 @@
 #include "integrator.h"
 #include "direct.h"
 
-__kernel void render_pass(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
+VOLCL_KERNEL void render_pass(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
                           __global const Triangle *triangles, __global const TriangleNormals *normals,
                           __global const Sphere *spheres, __global const Cylinder *cylinders,
                           __global const ShapeInfo *shapes,
                           __global const Bsdf *bsdfs, __global const Light *lights,
                           __global const float *light_tri_cdf, __global const int *light_tris,
+                          __global const float *env_data,
                           __global const Medium *media, __global const GridVolume *grids,
                           __global const float *grid_data, __global const RenderParams *params,
-                          __global const float *filter_table,
+                          __global const float *filter_table, __global const TriangleUv *tri_uvs,
+                          __global const UvMap *uv_maps, __global const Texture *textures,
+                          __global const float *texels, __global const float *bsdf_tables,
+                          __global const PhaseLobe *phase_lobes, __global const float *phase_tables,
                           __global float4 *sums, __global float4 *sums_sq, __global uint *invalid,
                           __global uint *cutoffs,
                           uint sample_base, int tile_x, int tile_y, int tile_w, int tile_pixels,
                           int first, int count, int slots) {
-    int gid = get_global_id(0);
+    int gid = (int)get_global_id(0);     /* launches stay below 2^31 work items (renderer.py) */
     if (gid >= count * slots) return;
     int slot = gid / count;
     int tp = first + gid % count;    /* the pixel's index in the tile */
     int px = tile_x + tp % tile_w, py = tile_y + tp / tile_w;
     int pixel = py * params->width + px;
     SceneData sc = {nodes, leaves, triangles, normals, spheres, cylinders, shapes, bsdfs, lights,
-                    light_tri_cdf, light_tris, media, grids, grid_data, params};
+                    light_tri_cdf, light_tris, env_data, media, grids, grid_data, params, tri_uvs, uv_maps,
+                    textures, texels, bsdf_tables, phase_lobes, phase_tables};
     Rng rng = rng_init(params->seed, (uint)pixel, sample_base + (uint)slot);
     float3 o, d;
     float t_max;

@@ -14,10 +14,18 @@ typedef struct {
     __global const Light *lights;
     __global const float *light_tri_cdf;    /* per area light: normalized prefix sums of triangle areas */
     __global const int *light_tris;
+    __global const float *env_data;     /* environment maps' texels and sampling tables (envmap.h) */
     __global const Medium *media;
     __global const GridVolume *grids;   /* grid descriptors of heterogeneous media */
     __global const float *grid_data;    /* every grid's voxels and majorant cells, concatenated */
     __global const RenderParams *params;
+    __global const TriangleUv *tri_uvs;     /* texture coordinates of triangles whose bsdf reads them */
+    __global const UvMap *uv_maps;          /* parametrizations of spheres and disks */
+    __global const Texture *textures;
+    __global const float *texels;           /* every bitmap's texels, concatenated */
+    __global const float *bsdf_tables;      /* roughplastic transmittance tables */
+    __global const PhaseLobe *phase_lobes;  /* lobes of the mixture phase functions (PHASE_LOBES) */
+    __global const float *phase_tables;     /* their piecewise-linear tables, concatenated */
 } SceneData;
 
 #endif

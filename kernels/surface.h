@@ -11,9 +11,17 @@ typedef struct {
     float3 ns;
     int shape;
     float mag;      /* magnitude of the coordinates p was computed from: scales offset_origin */
+    float2 uv;      /* texture coordinates and position derivatives: set by surface_texcoords */
+    float3 dpdu, dpdv;  /* (texcoords.h) where the bsdf reads them */
 } SurfacePoint;
 
+/* Hazard: forcing the inlining of a function that returns a struct makes LLVM 14 (at -O0 too) mark
+ * the returned copy with llvm.experimental.noalias.scope.decl, which Oclgrind 21.10 cannot run
+ * ("Undefined external function"); unoptimized builds (-cl-opt-disable, no __OPTIMIZE__) leave
+ * inlining to the compiler, optimized ones keep forcing it. */
+#ifdef __OPTIMIZE__
 __attribute__((always_inline))
+#endif
 inline SurfacePoint surface_point(const SceneData *sc, const Hit *h, float3 o, float3 d) {
     SurfacePoint s;
 #if VOLCL_HAS_CYLINDERS

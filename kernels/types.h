@@ -39,7 +39,7 @@ typedef struct {
     float p1[3];
     int normals;    /* index into the shading-normal buffer, or -1 for a flat triangle */
     float p2[3];
-    int pad0;
+    int uvs;        /* index into the texture-coordinate buffer (TriangleUv), or -1 where nothing reads them */
 } Triangle;
 
 /* Per-vertex shading normals of one triangle. */
@@ -49,6 +49,26 @@ typedef struct {
     float n2[3];
     int pad0[3];
 } TriangleNormals;
+
+/* Texture coordinates at a triangle's corners p0, p1, p2 (texcoords.h). A mesh without any gets
+ * (0, 0), (1, 0), (0, 1) at the corners of each triangle in its file's order: Mitsuba's barycentric
+ * parametrization. */
+typedef struct {
+    float uv[6];
+    float pad0[2];
+} TriangleUv;
+
+/* The parametrization of an analytic surface (texcoords.h): a sphere's (UV_MAP_SPHERE) or a disk's
+ * (UV_MAP_DISK, the disk being a triangle fan) uv and position derivatives follow from the hit
+ * point in the frame of the unit shape, as Mitsuba defines them. */
+#define UV_MAP_SPHERE 0
+#define UV_MAP_DISK 1
+typedef struct {
+    int kind;
+    int pad0[3];
+    float to_world[12];     /* row-major 3x4: the unit shape's frame */
+    float to_object[12];    /* its inverse */
+} UvMap;
 
 typedef struct {
     float center[3];
@@ -74,31 +94,108 @@ typedef struct {
     int interior;   /* medium index, or -1 for vacuum */
     int exterior;
     int is_transition;  /* the shape names a medium on either side: crossing it changes the medium */
-    int pad0[3];
+    int uv_map;     /* index into the analytic parametrizations (UvMap), or -1: a mesh's interpolated uvs */
+    int pad0[2];
 } ShapeInfo;
 
 #define BSDF_DIFFUSE 0
 #define BSDF_DIELECTRIC 1
 #define BSDF_CONDUCTOR 2
 #define BSDF_NULL 3
+#define BSDF_ROUGHCONDUCTOR 4
+#define BSDF_ROUGHDIELECTRIC 5
+#define BSDF_PLASTIC 6
+#define BSDF_ROUGHPLASTIC 7
+#define BSDF_THINDIELECTRIC 8
+#define BSDF_MASK 9         /* wraps `nested`: opaque with probability `opacity`, else a null crossing */
+#define BSDF_BUMPMAP 10     /* wraps `nested` in a shading frame tilted by a height map's gradient */
+#define BSDF_NORMALMAP 11   /* wraps `nested` in a shading frame from a normal map */
 
+/* Bsdf.flags */
+#define BSDF_FLAG_UV 1              /* this bsdf or one it wraps reads texture coordinates */
+#define BSDF_FLAG_UV_FRAME 2        /* shading tangent from dp/du as in Mitsuba (anisotropy, bump and normal maps) */
+#define BSDF_FLAG_PASSES 4          /* paths can pass through: a null component (mask, thindielectric) */
+#define BSDF_FLAG_NONLINEAR 8       /* plastics: Mitsuba's `nonlinear` */
+#define BSDF_FLAG_VISIBLE 16        /* microfacets: sample visible normals */
+#define BSDF_FLAG_SHADOWING 32      /* bump and normal maps: use_shadowing_function */
+#define BSDF_FLAG_FLIP_INVALID 64   /* bump and normal maps: flip_invalid_normals */
+
+#define MICROFACET_BECKMANN 0
+#define MICROFACET_GGX 1
+
+/* One bsdf. Each colour or float that Mitsuba lets a texture give has a *_tex field: a texture
+ * index (textures.h), or -1 for the constant beside it. Wrappers (mask, bump and normal maps) name
+ * the bsdf they wrap in `nested`. */
 typedef struct {
     int type;
     int twosided;
-    float eta;              /* dielectric: int_ior / ext_ior */
+    float eta;              /* dielectrics and plastics: int_ior / ext_ior */
     int conductor_mirror;   /* conductor without eta/k: reflect everything, times `color` */
-    float color[3];         /* diffuse reflectance or specular reflectance */
-    float pad0;
+    float color[3];         /* diffuse reflectance; conductors' specular reflectance; plastics' diffuse reflectance */
+    int color_tex;
     float cond_eta[3];
-    float pad1;
+    int eta_tex;
     float cond_k[3];
-    float pad2;
+    int k_tex;
+    float spec_r[3];        /* dielectrics and plastics: specular reflectance */
+    int spec_r_tex;
+    float spec_t[3];        /* dielectrics: specular transmittance */
+    int spec_t_tex;
+    float alpha_u;          /* microfacet roughness along the shading frame's s and t axes */
+    float alpha_v;
+    int alpha_u_tex;
+    int alpha_v_tex;
+    int distribution;       /* MICROFACET_* */
+    int flags;              /* BSDF_FLAG_* */
+    int nested;
+    int table;              /* roughplastic: offset of its 64-entry external transmittance table in bsdf_tables */
+    float opacity;          /* mask */
+    int opacity_tex;
+    float scale;            /* bump map: height scale */
+    int map_tex;            /* bump map: height texture; normal map: normal texture */
+    float spec_weight;      /* plastics: probability weight of the specular lobe */
+    float internal_refl;    /* plastic: internal diffuse Fresnel reflectance; roughplastic: rough internal reflectance */
+    float inv_eta2;
+    int pad0;
 } Bsdf;
+
+#define TEX_BITMAP 0
+#define TEX_CHECKERBOARD 1
+#define TEX_FILTER_BILINEAR 0
+#define TEX_FILTER_NEAREST 1
+#define TEX_WRAP_REPEAT 0
+#define TEX_WRAP_MIRROR 1
+#define TEX_WRAP_CLAMP 2
+
+/* A texture (textures.h). Bitmaps: texel (x, y) channel c at texels[data + (y * width + x) *
+ * channels + c], row 0 the image's top row, linear values. Checkerboards: child0/child1 are the
+ * textures of color0/color1, or -1 for the constants color0/color1 (mean0/mean1 their channel
+ * means, what a float parameter reads from them). to_uv maps the surface's uv first. */
+typedef struct {
+    int type;
+    int channels;
+    int width;
+    int height;
+    int data;
+    int filter;
+    int wrap;
+    int child0;
+    int child1;
+    int pad0[3];
+    float to_uv[6];         /* row-major 2x3 affine */
+    float pad1[2];
+    float color0[3];
+    float mean0;
+    float color1[3];
+    float mean1;
+} Texture;
 
 #define LIGHT_AREA 0
 #define LIGHT_POINT 1
 #define LIGHT_DIRECTIONAL 2
 #define LIGHT_CONSTANT 3
+#define LIGHT_ENVMAP 4
+#define LIGHT_SPOT 5
 
 typedef struct {
     int type;
@@ -106,19 +203,32 @@ typedef struct {
     int tri_count;
     int sphere;     /* area light on an analytic shape, else -1: a sphere's index, or a cylinder's index
                      * plus VOLCL_CYLINDER_CODE_BASE (the analytic index of cylinder.h) */
-    float value[3]; /* radiance (area, constant), intensity (point) or irradiance (directional) */
+    float value[3]; /* radiance (area, constant), intensity (point, spot), irradiance (directional); envmap: 1 */
     float area;     /* total emitting area (area lights) */
-    float position[3];  /* point light position */
+    float position[3];  /* point and spot light position */
     float pad0;
     float direction[3]; /* directional light: the direction light travels */
     float pad1;
+    float to_local[9];  /* spot, envmap: world directions to the light's own frame (row-major 3x3); an
+                         * envmap's is a rotation (its transpose maps back) */
+    float cos_cutoff;   /* spot: Mitsuba's falloff (lights.h) */
+    float cos_beam;
+    float cutoff;       /* radians */
+    float inv_transition;   /* 1 / (cutoff - beam width), radians */
+    int env_res[2];     /* envmap: image width and height (envmap.h has the layout of its tables) */
+    int env_data;       /* envmap: offset of its tables in env_data */
+    float env_norm;     /* envmap: W (H - 1) / (2 pi^2): patch probability density to solid angle, times sin */
+    int texture;        /* spot: its projection texture's index in textures, or -1 */
+    float tan_cutoff;   /* spot: tan of the cutoff angle (its texture coordinates) */
+    int pad2;
 } Light;
 
 #define MEDIUM_HOMOGENEOUS 0
 #define MEDIUM_HETEROGENEOUS 1
 
 #define PHASE_ISOTROPIC 0
-#define PHASE_HG 1
+#define PHASE_HG 1          /* g in the Medium record */
+#define PHASE_LOBES 2       /* a mixture of PhaseLobe records (VOLCL_HAS_PHASE_FAMILIES) */
 
 /* Homogeneous media use sigma_t, albedo and emission. Heterogeneous media read extinction and albedo
  * from the GridVolumes sigma_t_grid and albedo_grid, and `emission` holds the radiance Le: the
@@ -131,20 +241,60 @@ typedef struct {
     float sigma_t[3];   /* extinction, scale already applied */
     int albedo_grid;    /* heterogeneous: index into the grid descriptors, else -1 */
     float albedo[3];
-    float pad2;
+    int phase_lobe;     /* PHASE_LOBES: the first of its lobes in phase_lobes */
     float emission[3];  /* homogeneous: sigma_a * radiance (per unit length); heterogeneous: radiance */
-    float pad3;
+    int phase_lobe_count;
+    /* heterogeneous media with a spatially varying emission (VOLCL_HAS_EMISSIVE_MEDIA): the medium
+     * emits sigma_a(x) * Le(x), Le = emission_scale * the emission grid's value (EMISSION_RADIANCE),
+     * or emission_scale * the blackbody colour of (value - temperature_offset) * temperature_scale
+     * (EMISSION_TEMPERATURE), read from the table at grid_data[blackbody] (volcl/blackbody.py) */
+    int emission_mode;
+    int emission_grid;
+    float emission_scale;
+    int blackbody;
+    float temperature_scale;
+    float temperature_offset;
+    int emission_sampler;   /* emission NEE: offset of the medium's EmissionSampler words, or -1 */
+    int pad0;
 } Medium;
+
+#define EMISSION_CONSTANT 0     /* emission[] alone (or nothing) */
+#define EMISSION_RADIANCE 1
+#define EMISSION_TEMPERATURE 2
+
+#define LOBE_ISOTROPIC 0
+#define LOBE_HG 1               /* p[0] = g */
+#define LOBE_RAYLEIGH 2
+#define LOBE_DRAINE 3           /* p = (g, alpha, 1 / (1 + alpha (1 + 2 g^2) / 3)) */
+#define LOBE_TABULATED 4        /* table over cos */
+#define LOBE_FOURNIER_FORAND 5  /* p = (a, q, c3 / 16 pi, q^-a) (volcl/phase.py), table over x = sin^2(theta/2)^a */
+
+/* One lobe of a mixture phase function. A table is a piecewise-linear density on table_size knots
+ * at phase_tables[table]: the knots, then the density at each knot, then the CDF at each knot. */
+typedef struct {
+    int type;
+    float weight;       /* the lobe's probability in the mixture (the weights of a medium sum to 1) */
+    int table;          /* offset into phase_tables, or -1 */
+    int table_size;
+    float p[4];
+} PhaseLobe;
 
 #define GRID_TRILINEAR 0
 #define GRID_NEAREST 1
+
+#define GRID_DENSE 0
+#define GRID_SPARSE 1   /* bricks of 8^3 voxels (OpenVDB and NanoVDB files; VOLCL_HAS_SPARSE_GRIDS) */
 
 /* A grid of 1 or 3 channels filling the unit cube [0,1]^3 of its own frame (kernels/grid.h has the
  * lookup conventions). Voxel (x, y, z) channel c is grid_data[data + ((z * res[1] + y) * res[0] + x)
  * * channels + c], the .vol file's order. Extinction grids carry the medium's scale already, and a
  * coarse majorant grid of maj_res cells over the same cube at grid_data[majorants], x fastest: each
  * cell the largest value (over channels) that a lookup anywhere in the cell can return. Constant
- * volumes are 1x1x1 grids. */
+ * volumes are 1x1x1 grids. A sparse grid (layout GRID_SPARSE) has res voxels in bricks of 8^3:
+ * grid_data[data] starts its brick index (res / 8 entries, x fastest, int32 bit patterns): an entry
+ * e >= 0 is the offset of the brick's voxels (z slowest, x fastest, channels interleaved), e < 0
+ * the offset -1 - e of the one value every voxel of the brick holds; its majorant cells are the
+ * bricks (maj_res = res / 8). */
 typedef struct {
     float to_local[12];     /* world -> unit cube, row-major 3x4 */
     int res[3];
@@ -153,7 +303,8 @@ typedef struct {
     int filter;
     int data;
     int majorants;          /* -1 without a majorant grid */
-    int pad0[2];
+    int layout;             /* GRID_DENSE | GRID_SPARSE */
+    int pad0;
 } GridVolume;
 
 /* RenderParams.equiangular: how point-light direct lighting in homogeneous media is estimated */
@@ -187,7 +338,7 @@ typedef struct {
     int specular_chains_only;
     int camera_medium;      /* -1: vacuum */
     int light_count;
-    int env_light;          /* index of the constant light, or -1 */
+    int env_light;          /* index of the environment light (constant or envmap), or -1 */
     int filter_size;        /* entries of the filter's inverse-CDF table */
     float filter_radius;    /* pixels */
     uint seed;

@@ -8,6 +8,8 @@ from conftest import run_kernel
 from volcl import layout
 from volcl.bvh_wide import device_bvh
 
+pytestmark = pytest.mark.every_implementation
+
 
 @pytest.mark.parametrize("scale", [1e-3, 1.0, 1e3])
 @pytest.mark.parametrize("mesh", ["icosphere", "box", "torus-ish"])

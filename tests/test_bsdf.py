@@ -10,6 +10,8 @@ import stats
 from conftest import run_kernel
 from volcl import layout
 
+pytestmark = pytest.mark.every_implementation
+
 F32 = float(np.finfo(np.float32).eps)
 u32, f32 = np.uint32, np.float32
 GOLD_ETA = (0.143, 0.374, 1.442)    # gold-like complex IOR (eta + i k) at roughly R, G, B
@@ -28,7 +30,13 @@ def make_bsdf(kind, twosided=False, eta=1.5, color=(0.7, 0.5, 0.3), cond_eta=GOL
     b["eta"] = eta
     b["conductor_mirror"] = int(mirror)
     b["color"], b["cond_eta"], b["cond_k"] = color, cond_eta, cond_k
+    b["spec_r"], b["spec_t"] = 1.0, 1.0
+    for name in layout.BSDF_TEXTURE_FIELDS:
+        b[name] = -1
     return b
+
+
+NO_TABLES = np.zeros(1, np.float32)
 
 
 def unit(v):
@@ -36,22 +44,23 @@ def unit(v):
     return (v / np.linalg.norm(v, axis=-1, keepdims=True)).astype(np.float32)
 
 
-def sample(cl_env, prog, b, wo, seed=41, u1=None):
+def sample(cl_env, prog, b, wo, seed=41, u1=None, tables=NO_TABLES):
     """bsdf_sample for each row of wo (n, 3). Returns a dict of the outputs."""
     wo = np.ascontiguousarray(wo, np.float32)
     n = len(wo)
     u1 = np.full(n, -1.0, np.float32) if u1 is None else np.ascontiguousarray(u1, np.float32)
     wi, w, pdf, eta, info, val, epdf = run_kernel(
         cl_env, prog, "bsdf_sample_dirs", n,
-        [(f32, (3,)), (f32, (3,)), (f32, ()), (f32, ()), (np.int32, (2,)), (f32, (3,)), (f32, ())],
-        u32(seed), inputs=[b, wo, u1])
+        [(f32, (3,)), (f32, (3,)), (f32, ()), (f32, ()), (np.int32, (3,)), (f32, (3,)), (f32, ())],
+        u32(seed), inputs=[b, np.asarray(tables, np.float32), wo, u1])
     return dict(wi=wi, weight=w, pdf=pdf, eta=eta, ok=info[:, 0].astype(bool), delta=info[:, 1].astype(bool),
-                value=val, eval_pdf=epdf)
+                null=info[:, 2].astype(bool), value=val, eval_pdf=epdf)
 
 
-def eval_pairs(cl_env, prog, b, wo, wi):
+def eval_pairs(cl_env, prog, b, wo, wi, tables=NO_TABLES):
     wo, wi = np.ascontiguousarray(wo, np.float32), np.ascontiguousarray(wi, np.float32)
-    val, pdf = run_kernel(cl_env, prog, "bsdf_eval_pairs", len(wo), [(f32, (3,)), (f32, ())], inputs=[b, wo, wi])
+    val, pdf = run_kernel(cl_env, prog, "bsdf_eval_pairs", len(wo), [(f32, (3,)), (f32, ())],
+                          inputs=[b, np.asarray(tables, np.float32), wo, wi])
     return val, pdf
 
 

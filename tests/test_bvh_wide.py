@@ -124,3 +124,33 @@ def test_deterministic():
     a, _ = build_wide(lo, hi)
     b, _ = build_wide(lo.copy(), hi.copy())
     assert a.tobytes() == b.tobytes()
+
+
+def test_leaf_packets_mark_only_surfaces_that_block_shadow_rays():
+    """The shadow query stops at the first opaque lane, so every surface that lets light through
+    (null, masks of any opacity, thin dielectrics, also when wrapped) must be packed non-opaque."""
+    from volcl import pack
+    from volcl.scene import load_string
+    bsdfs = {
+        "diffuse": ('<bsdf type="diffuse"/>', True),
+        "null": ('<bsdf type="null"/>', False),
+        "mask": ('<bsdf type="mask"><float name="opacity" value="0.999"/><bsdf type="diffuse"/></bsdf>', False),
+        "pane": ('<bsdf type="thindielectric"/>', False),
+        "mask_twosided": ('<bsdf type="mask"><bsdf type="twosided"><bsdf type="diffuse"/></bsdf></bsdf>', False),
+        "conductor": ('<bsdf type="conductor"/>', True),
+    }
+    shapes = "".join(f'<shape type="sphere"><point name="center" x="{3 * i}" y="0" z="0"/>{xml}</shape>'
+                     f'<shape type="rectangle"><transform name="to_world"><translate x="{3 * i}" y="5"/>'
+                     f'</transform>{xml}</shape>'
+                     for i, (xml, _) in enumerate(bsdfs.values()))
+    scene = load_string(f'<scene version="3.0.0">{shapes}</scene>')
+    a = pack.pack(scene).arrays
+    packets = a["leaves"]
+    used = packets["prim"].ravel()
+    lanes = packets["opaque"].ravel()
+    shape_of = np.where(used >= 0, a["triangles"]["shape"][np.maximum(used, 0)],
+                        a["spheres"]["shape"][np.maximum(-1 - used, 0)])
+    want = np.array([o for _, o in bsdfs.values() for _ in range(2)])    # sphere, rectangle per bsdf
+    real = (packets["v"] != 0).any(axis=1).ravel() | (used < 0)    # unused lanes: code 0, no vertices
+    assert set(shape_of[real]) == set(range(len(want)))
+    np.testing.assert_array_equal(lanes[real] != 0, want[shape_of[real]])

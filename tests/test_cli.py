@@ -39,7 +39,7 @@ def test_render_png_and_exr_with_metadata(tmp_path):
     meta = {k.split(":", 1)[1]: v for k, v in attrs.items() if k.startswith("volcl:")}
     assert set(meta) == {"scene", "scene_sha256", "defines", "spp", "spp_requested", "complete", "seed",
                          "device", "features", "kernel_sha256", "render_seconds", "version", "invalid_samples",
-                         "tracking_cutoffs", "rel_error", "stop_reason", "estimator"}
+                         "tracking_cutoffs", "rel_error", "stop_reason", "estimator", "device_shares"}
     assert meta["scene"] == str(ROOT / "scenes" / "cbox.xml") and meta["version"] == volcl_version
     assert meta["scene_sha256"] == hashlib.sha256((ROOT / "scenes" / "cbox.xml").read_bytes()).hexdigest()
     assert meta["spp_requested"] == 3 and meta["complete"] == 1 and meta["render_seconds"] > 0

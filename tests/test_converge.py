@@ -22,10 +22,12 @@ def test_choices_that_apply():
 def test_equiangular_reaches_3_percent_before_distance_sampling_alone(device, tmp_path):
     """The point light in fog at 16x12: equiangular sampling combined with distance sampling by
     MIS reaches 3% relative RMSE within the budget, distance sampling alone later or not at all
-    (README, "Convergence": about 9x the efficiency at 64x48)."""
+    (README, "Convergence": about 9x the efficiency at 64x48). The budget is twice the CPU time
+    equiangular sampling needs at 16x12 (about 3 s on a 2-core EPYC), so noise in the clock
+    cannot decide the test; distance sampling would need about 7 s."""
     sc = load(ROOT / "scenes" / "point_in_fog.xml")
     sc.camera.width, sc.camera.height = 16, 12
-    report = converge(sc, name="point_in_fog", out=tmp_path, max_seconds=3.0, reference_seconds=8.0,
+    report = converge(sc, name="point_in_fog", out=tmp_path, max_seconds=6.0, reference_seconds=8.0,
                       choices=["mis", "equiangular+mis"], device=device, quiet=True)
     eq, dist = report.curve("equiangular+mis"), report.curve("mis")
     t_eq, t_dist = eq.time_to(0.03), dist.time_to(0.03)

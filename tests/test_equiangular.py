@@ -11,8 +11,11 @@ from scenebuild import camera, look_at, medium, scene
 from stats import assert_integrates_to_one, chi2_1d, line_rule
 from volcl.estimator import Estimator
 from volcl.features import detect
+from volcl.phase import pdf as phase_pdf
 from volcl.renderer import render
 from volcl.scene.model import Emitter, rgb
+
+pytestmark = pytest.mark.every_implementation
 
 SPAN = 1000.0   # EQUIANGULAR_SPAN in kernels/equiangular.h
 
@@ -108,9 +111,12 @@ def test_pdf_is_zero_outside_the_segment(cl_env, prog):
 # ---- in the path loop ------------------------------------------------------------------------
 
 
-def _fog_scene(sigma_t=0.5, albedo=0.8, g=0.3, width=16, height=16, max_depth=2):
-    """Camera and point light inside an infinite homogeneous medium (no surfaces)."""
+def _fog_scene(sigma_t=0.5, albedo=0.8, g=0.3, width=16, height=16, max_depth=2, phase=None):
+    """Camera and point light inside an infinite homogeneous medium (no surfaces); `phase`, a model
+    Phase, replaces the HG phase function of asymmetry g."""
     fog = medium(sigma_t, albedo, g=g)
+    if phase is not None:
+        fog.phase = phase
     cam = camera(width, height, fov=40, to_world=look_at((0, 0, 0), (0, 0, -1)), medium=fog)
     light = Emitter("point", rgb(5.0), position=np.array([0.37, -0.21, -2.0]))
     return scene([], [light], cam=cam, max_depth=max_depth, media=[fog])
@@ -139,7 +145,6 @@ def _single_scattering(sc, sub=6, panels=64, order=8):
     intensity = sc.emitters[0].value[0]
     sigma_t = fog.sigma_t[0]
     sigma_s = sigma_t * fog.albedo[0]
-    g = fog.phase.g
     s0, s1 = cam.near_clip * along, cam.far_clip * along
     delta = (lp - o) @ dw.reshape(-1, 3).T
     delta = delta.reshape(along.shape)
@@ -156,7 +161,7 @@ def _single_scattering(sc, sub=6, panels=64, order=8):
     p = o + s[..., None] * dw[..., None, :]
     wi = (lp - p) / np.linalg.norm(lp - p, axis=-1, keepdims=True)
     cos = (wi * dw[..., None, :]).sum(-1)
-    phase = (1 - g * g) / (4 * math.pi * (1 + g * g - 2 * g * cos) ** 1.5)
+    phase = phase_pdf(fog.phase, cos)      # float64 (HG: (1 - g^2) / (4 pi (1 + g^2 - 2 g cos)^1.5))
     f = np.exp(-sigma_t * (s - s0[..., None] + r)) * sigma_s * phase * intensity / hh[..., None]
     L = (f * wts).sum(-1) * (th1 - th0)
     # the kernel's ray starts at the near clip plane; transmittance counts from there (s - s0)

@@ -14,6 +14,8 @@ from volcl.pack import pack
 from volcl.renderer import Renderer
 from volcl.scene import transform as tf
 
+pytestmark = pytest.mark.every_implementation
+
 PROGRAM = "grid_tests.cl"
 
 

@@ -21,6 +21,8 @@ from volcl.renderer import render
 from volcl.scene import load
 from volcl.scene.model import Bsdf, Emitter, Shape, rgb
 
+pytestmark = pytest.mark.every_implementation
+
 SCENES = sorted((Path(__file__).resolve().parent.parent / "scenes").glob("*.xml"))
 
 

@@ -9,6 +9,8 @@ from volcl.features import all_features
 from volcl.layout import SHARED_STRUCTS
 from volcl.program import build_options
 
+pytestmark = pytest.mark.every_implementation
+
 
 def probe_source():
     """A probe kernel writing sizeof and __builtin_offsetof of every field, in dtype order."""

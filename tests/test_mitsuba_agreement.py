@@ -111,8 +111,33 @@ def write_obj(path, vertices, faces, normals=None):
     Path(path).write_text("\n".join(lines) + "\n")
 
 
+def write_image(path, pixels, fmt=None):
+    import OpenImageIO as oiio
+    pixels = np.ascontiguousarray(pixels)
+    h, w, c = pixels.shape
+    out = oiio.ImageOutput.create(str(path))
+    assert out.open(str(path), oiio.ImageSpec(w, h, c, fmt or oiio.FLOAT))
+    out.write_image(pixels)
+    out.close()
+
+
+def sky_image(h=16, w=32):
+    """A sky over a dark ground with a small bright sun: texels with real contrast."""
+    theta = (np.arange(h)[:, None] + 0.5) / h * np.pi
+    phi = (np.arange(w)[None, :] + 0.5) / w * 2 * np.pi
+    up = np.clip(np.cos(theta), 0, None)
+    sky = (0.3 + 1.5 * up + 0.4 * np.cos(phi) * up)[..., None] * np.array([0.5, 0.7, 1.0])
+    sky = np.where(theta[..., None] < np.pi / 2, sky, np.array([0.15, 0.1, 0.05]))
+    sky[h // 4, (2 * w) // 3] = [60.0, 50.0, 40.0]
+    return sky.astype(np.float32)
+
+
 def _files(folder):
-    """Meshes, includes and spectra the scenes below refer to."""
+    """Meshes, includes, spectra and images the scenes below refer to."""
+    import OpenImageIO as oiio
+    write_image(folder / "sky.exr", sky_image())
+    codes = (np.clip(sky_image(16, 24) / 2.0, 0, 1) ** (1 / 2.2) * 255).astype(np.uint8)     # 3:2, sRGB
+    write_image(folder / "sky_3x2.png", codes, oiio.UINT8)
     v, f = uv_sphere()
     write_obj(folder / "coarse_sphere.obj", v, f)
     write_obj(folder / "coarse_sphere_normals.obj", v, f, normals=v / np.linalg.norm(v, axis=1, keepdims=True))
@@ -217,6 +242,49 @@ def _cases():
     s["path_ignores_media"] = scene_xml(PATH.format(depth=-1) + sensor() + LIGHT.format(radiance=8) + FLOOR + (
         '<shape type="sphere"><float name="radius" value="0.7"/><bsdf type="null"/>'
         '<medium type="homogeneous" name="interior"><float name="sigma_t" value="3"/></medium></shape>'))
+    env = ('<emitter type="envmap"><string name="filename" value="{file}"/><float name="scale" value="{scale}"/>'
+           '<transform name="to_world">{frame}</transform></emitter>')
+    sky = env.format(file="sky.exr", scale=1.5, frame='<rotate y="1" angle="70"/><rotate x="1" angle="-10"/>')
+    s["envmap_surfaces"] = scene_xml(PATH.format(depth=4) + sensor(origin="0, 1, 4") + sky + FLOOR + (
+        '<shape type="sphere"><point name="center" value="-0.6, 0, 0"/><float name="radius" value="0.5"/></shape>'
+        '<shape type="sphere"><point name="center" value="0.6, 0, 0.2"/><float name="radius" value="0.45"/>'
+        '<bsdf type="dielectric"/></shape>'))
+    s["envmap_medium"] = scene_xml('<integrator type="volpath"><integer name="max_depth" value="24"/></integrator>'
+                                   + sensor(origin="0, 0.8, 4") + sky + FLOOR + (
+        '<shape type="sphere"><float name="radius" value="0.8"/><bsdf type="null"/>'
+        '<medium type="homogeneous" name="interior"><rgb name="sigma_t" value="0.25, 0.5, 1"/><float name="scale" value="4"/>'
+        '<float name="albedo" value="0.9"/><phase type="hg"><float name="g" value="0.5"/></phase></medium></shape>'))
+    s["envmap_png_3x2_mirrored"] = scene_xml(PATH.format(depth=3) + sensor() + env.format(
+        file="sky_3x2.png", scale=1.0, frame='<scale x="-1"/><rotate z="1" angle="30"/>') + (
+        '<shape type="sphere"><float name="radius" value="0.7"/><bsdf type="diffuse">'
+        '<rgb name="reflectance" value="0.8, 0.6, 0.4"/></bsdf></shape>'))
+    s["envmap_direct"] = scene_xml(direct.format(e=2, b=1) + sensor(origin="0, 1, 4") + sky + FLOOR
+                                   + '<shape type="sphere"><float name="radius" value="0.6"/></shape>')
+    s["envmap_hidden"] = scene_xml('<integrator type="volpath"><integer name="max_depth" value="6"/>'
+                                   '<boolean name="hide_emitters" value="true"/></integrator>'
+                                   + sensor(origin="0, 1, 4") + sky + FLOOR
+                                   + '<shape type="sphere"><float name="radius" value="0.6"/></shape>')
+    spot = ('<emitter type="spot"><rgb name="intensity" value="{i}"/><float name="cutoff_angle" value="{c}"/>'
+            '<float name="beam_width" value="{b}"/><transform name="to_world"><lookat origin="{o}" target="{t}"/>'
+            '</transform></emitter>')
+    s["spot_surfaces"] = scene_xml(PATH.format(depth=3) + sensor(origin="0, 1.5, 4") + FLOOR
+                                   + spot.format(i="30, 20, 10", c=35, b=20, o="0.5, 1.5, 0.5", t="-0.2, -1, 0")
+                                   + spot.format(i="8", c=15, b=15, o="-1, 1, 1", t="0.3, -1, -0.3")
+                                   + '<shape type="sphere"><float name="radius" value="0.4"/></shape>')
+    s["spot_in_fog"] = scene_xml('<integrator type="volpath"><integer name="max_depth" value="12"/></integrator>'
+                                 + sensor(origin="0, 0.5, 4") + FLOOR
+                                 + spot.format(i="20", c=30, b=25, o="0, 0.8, 0", t="0.3, -1, 0") + (
+        '<shape type="cube"><transform name="to_world"><scale x="2" y="1.1" z="1.5"/><translate y="0.2"/>'
+        '</transform><bsdf type="null"/><medium type="homogeneous" name="interior">'
+        '<rgb name="sigma_t" value="0.3"/><float name="albedo" value="0.9"/></medium></shape>'))
+    # Mitsuba's projection texture: a checkerboard in the spot's cone (the uvs of its square)
+    slide = ('<texture type="checkerboard" name="texture"><rgb name="color0" value="1, 0.7, 0.3"/>'
+             '<rgb name="color1" value="0.1, 0.3, 0.9"/><transform name="to_uv"><scale value="4"/></transform>'
+             '</texture></emitter>')
+    s["spot_textured"] = scene_xml(PATH.format(depth=3) + sensor(origin="0, 1.5, 4") + FLOOR
+                                   + spot.format(i="30", c=35, b=25, o="0.3, 1.5, 0.5", t="-0.1, -1, 0")
+                                   .replace("</emitter>", slide))
+    s["spot_textured_in_fog"] = s["spot_in_fog"].replace("</emitter>", slide, 1)
     spp = {"blackbody": 256}
     return {name: (text, spp.get(name, 512), 256, "llvm_ad_spectral" if name == "blackbody" else VARIANT)
             for name, text in s.items()}

@@ -7,9 +7,12 @@ import math
 import numpy as np
 import pytest
 
+import phasekit
 import stats
 from conftest import run_kernel
-from volcl import layout
+from volcl.scene.model import Phase
+
+pytestmark = pytest.mark.every_implementation
 
 N = 1_000_000
 F32 = float(np.finfo(np.float32).eps)
@@ -34,12 +37,8 @@ def prog(test_program):
     return test_program("sampling_tests.cl")
 
 
-def medium(g=None):
-    m = np.zeros(1, layout.MEDIUM)
-    m["phase"] = layout.PHASE_TYPES["isotropic" if g is None else "hg"]
-    m["g"] = 0.0 if g is None else g
-    m["sigma_t"], m["albedo"] = 1.0, 1.0
-    return m
+def hg_phase(g=None):
+    return Phase("isotropic") if g is None else Phase("hg", g)
 
 
 def hg_u(g, u):
@@ -66,16 +65,14 @@ def dlog_hg(g, c):
 
 
 def sample(cl_env, prog, g, d_in, seed=31, n=N):
-    m = medium(g)
-    d, pdf, ev = run_kernel(cl_env, prog, "phase_sample_dirs", n, [(f32, (3,)), (f32, ()), (f32, ())],
-                            u32(seed), inputs=[m, d_in])
-    return d, pdf, ev
+    s = phasekit.sample(cl_env, prog, hg_phase(g), d_in, seed, n)
+    # exact sampling: weight 1, and the pdf phase_eval_pdf gives is the value
+    assert np.all(s.weight == 1.0) and np.all(s.eval_pdf == s.value), f"g={g}: weight != 1 or pdf != value"
+    return s.d, s.pdf, s.value
 
 
 def device_eval(cl_env, prog, g, cos_theta):
-    c = np.ascontiguousarray(np.asarray(cos_theta, np.float32).ravel())
-    (v,) = run_kernel(cl_env, prog, "phase_eval_cos", c.size, [(f32, ())], inputs=[medium(g), c])
-    return v.reshape(np.shape(cos_theta))
+    return phasekit.eval_cos(cl_env, prog, hg_phase(g), cos_theta)
 
 
 def check_valid(d, pdf, ev, what):

@@ -8,6 +8,8 @@ import pytest
 from volcl.renderer import Renderer
 from volcl.scene import load
 
+pytestmark = pytest.mark.every_implementation
+
 ROOT = Path(__file__).resolve().parent.parent
 
 

@@ -11,6 +11,8 @@ from volcl.renderer import render
 from volcl.scene import transform as tf
 from volcl.scene.model import Bsdf, Emitter, rgb
 
+pytestmark = pytest.mark.every_implementation
+
 SIGMA = np.array([1.0, 2.0, 0.5])
 ALBEDO = np.array([0.9, 0.7, 0.5])
 

@@ -13,6 +13,8 @@ from volcl.renderer import render
 from volcl.scene import load
 from volcl.scene.model import Bsdf, Shape, rgb
 
+pytestmark = pytest.mark.every_implementation
+
 
 def test_absorbing_medium_attenuates_emitter(device):
     """Camera in a purely absorbing medium facing an emitter at distance d: L = Le exp(-sigma_t d)."""
@@ -58,35 +60,35 @@ def test_emissive_medium_in_black_emitting_box(device):
     assert_mean_matches(r, Le, what="emissive medium")
 
 
-def _sphere_of_medium(bsdf, med, cam_medium=None, outer=None, spp=256):
+def _sphere_of_medium(device, bsdf, med, cam_medium=None, outer=None, spp=256):
     """Albedo-1 sphere(s) in a constant environment of radiance 1, seen by the camera."""
     shapes = []
     if outer is not None:
         shapes.append(sphere((0, 0, 0), 3.0, Bsdf("null"), interior=outer))
     shapes.append(sphere((0, 0, 0), 1.0, bsdf, interior=med, exterior=outer))
     cam = camera(12, 12, fov=45, to_world=look_at((0, 0, 2.5), (0, 0, 0)), medium=cam_medium)
-    return render(scene(shapes, [constant_env(1.0)], cam=cam), spp=spp)
+    return render(scene(shapes, [constant_env(1.0)], cam=cam), spp=spp, device=device)
 
 
 @pytest.mark.parametrize("g", [-0.9, 0.0, 0.9])
 def test_albedo_one_sphere_behind_null_boundary_renders_one(device, g):
-    r = _sphere_of_medium(Bsdf("null"), medium(3.0, 1.0, g=g))
+    r = _sphere_of_medium(device, Bsdf("null"), medium(3.0, 1.0, g=g))
     assert_mean_matches(r, 1.0, what=f"null-bounded sphere g={g}")
 
 
 def test_albedo_one_chromatic_sphere_renders_one(device):
-    r = _sphere_of_medium(Bsdf("null"), medium([0.5, 3.0, 8.0], 1.0, g=0.6))
+    r = _sphere_of_medium(device, Bsdf("null"), medium([0.5, 3.0, 8.0], 1.0, g=0.6))
     assert_mean_matches(r, 1.0, what="chromatic sphere")
 
 
 def test_albedo_one_sphere_behind_index_matched_dielectric_renders_one(device):
-    r = _sphere_of_medium(Bsdf("dielectric", int_ior=1.33, ext_ior=1.33), medium(3.0, 1.0, g=0.5))
+    r = _sphere_of_medium(device, Bsdf("dielectric", int_ior=1.33, ext_ior=1.33), medium(3.0, 1.0, g=0.5))
     assert_mean_matches(r, 1.0, what="index-matched dielectric sphere")
 
 
 def test_albedo_one_sphere_behind_glass_renders_one(device):
     """A refracting boundary loses no energy either: a white furnace stays white."""
-    r = _sphere_of_medium(Bsdf("dielectric", int_ior=1.5, ext_ior=1.0), medium(2.0, 1.0, g=0.0))
+    r = _sphere_of_medium(device, Bsdf("dielectric", int_ior=1.5, ext_ior=1.0), medium(2.0, 1.0, g=0.0))
     assert_mean_matches(r, 1.0, what="glass sphere of albedo-1 medium")
 
 
@@ -94,7 +96,7 @@ def test_nested_media_with_camera_inside_the_outer_one(device):
     """An albedo-1 sphere inside a larger albedo-1 fog sphere, camera inside the fog: 1 everywhere."""
     fog = medium(0.4, 1.0, g=-0.3)
     core = medium([2.0, 4.0, 1.0], 1.0, g=0.8)
-    r = _sphere_of_medium(Bsdf("null"), core, cam_medium=fog, outer=fog)
+    r = _sphere_of_medium(device, Bsdf("null"), core, cam_medium=fog, outer=fog)
     assert_mean_matches(r, 1.0, what="nested media")
 
 

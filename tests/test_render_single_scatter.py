@@ -8,11 +8,14 @@ phase-sampled rays that cross the boundary and hit the light must be weighted co
 import math
 
 import numpy as np
+import pytest
 
 from imagestats import assert_mean_matches
 from scenebuild import box_mesh, camera, diffuse, look_at, medium, quad_mesh, scene
 from volcl.renderer import render
 from volcl.scene.model import Bsdf, Shape, rgb
+
+pytestmark = pytest.mark.every_implementation
 
 SIGMA, ALBEDO, G, LE = 1.0, 0.95, 0.6, 30.0
 LIGHT_Y, LIGHT_HALF = 1.175, 0.3

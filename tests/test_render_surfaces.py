@@ -10,6 +10,8 @@ from scenebuild import (box_mesh, camera, constant_env, diffuse, furnace, look_a
 from volcl.renderer import render
 from volcl.scene.model import Bsdf, Emitter, Shape, rgb
 
+pytestmark = pytest.mark.every_implementation
+
 
 @pytest.mark.parametrize("albedo", [0.5, 0.8])
 def test_furnace_converges_to_geometric_series(device, albedo):
@@ -86,16 +88,16 @@ def test_directional_light_on_diffuse_plane(device):
     np.testing.assert_allclose(r.image, E * cos * R / math.pi, rtol=1e-5)
 
 
-def _sphere_in_env(bsdf, spp=256, width=16):
+def _sphere_in_env(device, bsdf, spp=256, width=16):
     cam = camera(width, width, fov=30, to_world=look_at((0, 0, 5), (0, 0, 0)))
     sc = scene([sphere((0, 0, 0), 1.0, bsdf)], [constant_env(1.0)], cam=cam)
-    return render(sc, spp=spp)
+    return render(sc, spp=spp, device=device)
 
 
 def test_diffuse_sphere_in_constant_environment(device):
     """A convex object sees only the environment: L = a * Le on the sphere, Le around it."""
     a = 0.6
-    r = _sphere_in_env(diffuse(a))
+    r = _sphere_in_env(device, diffuse(a))
     cam = camera(16, 16, fov=30, to_world=look_at((0, 0, 5), (0, 0, 0)))
     # pixels entirely on or off the sphere (the silhouette pixels mix both)
     c = _silhouette_coverage(cam)
@@ -128,7 +130,7 @@ def _silhouette_coverage(cam, sub=8):
 ], ids=["glass", "index-matched", "mirror"])
 def test_lossless_sphere_in_constant_environment_is_invisible(device, bsdf):
     """Glass and perfect mirrors lose no energy: in a uniform environment they render as Le."""
-    r = _sphere_in_env(bsdf, spp=128)
+    r = _sphere_in_env(device, bsdf, spp=128)
     assert_mean_matches(r, 1.0, what=bsdf.kind)
 
 

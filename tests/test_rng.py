@@ -6,6 +6,8 @@ import pytest
 import stats
 from conftest import run_kernel
 
+pytestmark = pytest.mark.every_implementation
+
 u32, i32, f32 = np.uint32, np.int32, np.float32
 SEED = 20240611
 

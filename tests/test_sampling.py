@@ -12,6 +12,8 @@ from volcl.features import all_features
 from volcl.pack import filter_cdf_size, filter_table
 from volcl.scene.model import Filter
 
+pytestmark = pytest.mark.every_implementation
+
 N = 1_000_000
 F32 = float(np.finfo(np.float32).eps)
 u32, i32, f32 = np.uint32, np.int32, np.float32

@@ -32,8 +32,9 @@ MITSUBA_CASES = {
     "unknown element": ('<foo/>', 2, "<foo>", "supported here", "<shape>"),
     "unknown element in shape": ('<shape type="cube">\n<texture type="bitmap"/>\n</shape>', 3,
                                  "<texture>", "<bsdf>", "<emitter>", "<medium>"),
-    "unknown plugin type": ('<shape type="cube">\n<bsdf type="plastic"/>\n</shape>', 3,
-                            "'plastic'", "conductor, dielectric, diffuse, null, twosided"),
+    "unknown plugin type": ('<shape type="cube">\n<bsdf type="principled"/>\n</shape>', 3,
+                            "'principled'", "conductor, dielectric, diffuse, mask, normalmap, null, plastic, "
+                            "roughconductor, roughdielectric, roughplastic, thindielectric, twosided"),
     "unknown shape type": ('<shape type="bsplinecurve"/>', 2, "'bsplinecurve'", "obj", "serialized", "sphere"),
     "unknown parameter": ('<bsdf type="diffuse">\n<float name="roughness" value="0.1"/>\n</bsdf>',
                           3, "'roughness'", "supported: reflectance"),
@@ -140,8 +141,8 @@ MITSUBA_CASES = {
                                 '<bsdf type="diffuse"/></bsdf>', 2, "exactly one"),
     "twosided dielectric": ('<bsdf type="twosided">\n<bsdf type="dielectric"/></bsdf>', 3,
                             "dielectric", "transmission"),
-    "named conductor": ('<bsdf type="conductor"><string name="material" value="Au"/></bsdf>', 2,
-                        "'Au'", '"none"'),
+    "unknown conductor material": ('<bsdf type="conductor"><string name="material" value="Unobtainium"/></bsdf>', 2,
+                                   "'Unobtainium'", "Au, Be", '"none"'),
     "unknown ior name": ('<bsdf type="dielectric"><string name="int_ior" value="glass"/></bsdf>',
                          2, "'glass'", "bk7", "acrylic glass", "polypropylene"),
     "point emitter in shape": ('<shape type="cube">\n<emitter type="point"/></shape>', 3,
@@ -366,8 +367,8 @@ def test_bad_version(tmp_path):
 
 
 def test_errors_in_included_files_name_that_file(tmp_path):
-    (tmp_path / "part.xml").write_text('<scene version="2.0.0">\n\n<bsdf type="plastic"/>\n</scene>\n')
-    expect_error(tmp_path, M.format('<include filename="part.xml"/>'), 3, "'plastic'", name="part.xml",
+    (tmp_path / "part.xml").write_text('<scene version="2.0.0">\n\n<bsdf type="principled"/>\n</scene>\n')
+    expect_error(tmp_path, M.format('<include filename="part.xml"/>'), 3, "'principled'", name="part.xml",
                  scene="scene.xml")
 
 

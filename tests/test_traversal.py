@@ -7,6 +7,8 @@ from conftest import run_kernel
 from volcl import layout
 from volcl.bvh_wide import device_bvh
 
+pytestmark = pytest.mark.every_implementation
+
 
 def random_scene(rng, n_tri=3000, n_sph=40):
     centers = rng.uniform(-1, 1, (n_tri, 1, 3))

@@ -87,7 +87,7 @@ def _progress(progress, scene: Scene, spp):
 
 def render(scene, spp: int | None = None, seed: int | None = None, device=None, time_limit: float | None = None,
            target_error: float | None = None, progress=None, estimator: Estimator | None = None,
-           tile=None) -> RenderResult:
+           tile=None, tile_size=None, scheduler=None) -> RenderResult:
     """Render `scene` and return a RenderResult (numpy image and variance, spp, seconds, invalid
     samples, stop reason, metadata).
 
@@ -96,11 +96,19 @@ def render(scene, spp: int | None = None, seed: int | None = None, device=None, 
     seed        the random sequence (default: the scene's sampler seed); the same seed and device
                 give the same bits
     device      a volcl.Device (volcl.devices()), a selector ('P:D', a name substring, 'cpu',
-                'gpu'), or None: $VOLCL_DEVICE, else the first device whose kernels build
+                'gpu'), or None: $VOLCL_DEVICE, else the first device whose kernels build; or
+                several devices for one render: 'all', 'A,B,...', or a list of Devices and
+                selectors (the image's tiles go to whichever device is free; the same bits as
+                one device of the same implementation; RenderResult.shares: who did what)
     progress    True for a progress bar, or a callable given the samples per pixel each pass adds
     estimator   a volcl.Estimator (NEE, MIS, equiangular sampling; default: volcl's defaults)
     tile        (x, y, width, height) or a volcl.Tile: render only those pixels, all their samples;
-                volcl.merge joins tiles into the image, bit for bit
+                volcl.merge joins tiles into the image, bit for bit (on one device)
+    tile_size   the tiles' size in pixels (one number or (width, height)) of a render on several
+                devices (default: volcl.rounds.default_tile_size)
+    scheduler   render on a Dask cluster instead (volcl.cluster): a distributed.Client, a
+                scheduler address, or 'local:N' (N single-threaded worker processes here); the
+                image is bit for bit a local render's on the same device implementation
 
     The scene stays uploaded to the device, and each kernel feature set is built once per device,
     so renders in a loop (after traverse() edits, too) pay only for their samples. Values set
@@ -108,7 +116,23 @@ def render(scene, spp: int | None = None, seed: int | None = None, device=None, 
     scene = _prepared(scene)
     if scene.pending:
         apply_pending(scene, stacklevel=2)
-    r = Renderer(scene, device=devmod.resolve(device), seed=seed, estimator=estimator, tile=tile)
+    if scheduler is not None:
+        return _render_on_cluster(scene, scheduler, spp, seed, time_limit, target_error, progress, estimator,
+                                  tile, tile_size, device)
+    devices = devmod.resolve_many(device)
+    if len(devices) == 1 and tile_size is None:
+        r = Renderer(scene, device=devices[0], seed=seed, estimator=estimator, tile=tile)
+    elif tile is not None:
+        raise VolclError("tile= renders one tile on one device; a render on several devices cuts the image "
+                         "into tiles itself (tile_size=)")
+    else:
+        from .rounds import renderer_for
+        r = renderer_for(scene, devices, seed=seed, estimator=estimator, tile_size=tile_size)
+    return _run(r, scene, spp, time_limit, target_error, progress)
+
+
+def _run(r, scene, spp, time_limit, target_error, progress) -> RenderResult:
+    """r.render with render()'s defaults and progress bar."""
     if spp is None and time_limit is None and target_error is None:
         spp = scene.spp
     callback, close = _progress(progress, scene, spp)
@@ -116,6 +140,24 @@ def render(scene, spp: int | None = None, seed: int | None = None, device=None, 
         return r.render(spp, progress=callback, time_limit=time_limit, target_error=target_error)
     finally:
         close()
+
+
+def _render_on_cluster(scene, scheduler, spp, seed, time_limit, target_error, progress, estimator, tile,
+                       tile_size, device) -> RenderResult:
+    from . import cluster
+    from .rounds import renderer_for
+    if tile is not None or device is not None:
+        raise VolclError("scheduler= renders on the cluster's workers, each with the device it chose (volcl "
+                         "worker --device); tile= and device= are for renders on this machine")
+    client = cluster.connect(scheduler)
+    executor = cluster.DaskExecutor(client)
+    try:
+        r = renderer_for(scene, executor=executor, seed=seed, estimator=estimator, tile_size=tile_size)
+        return _run(r, scene, spp, time_limit, target_error, progress)
+    finally:
+        executor.close()
+        if client is not scheduler:
+            cluster.close(client)
 
 
 def write(result: RenderResult, path) -> Path:
@@ -129,7 +171,8 @@ def write(result: RenderResult, path) -> Path:
 
 def devices() -> list:
     """Every OpenCL device (volcl.Device objects; `volcl.device.kernels_build(d)` tells whether
-    volcl's kernels build on one). The same objects are handed out every time."""
+    volcl's kernels build on one, `volcl.device.check(d)` whether it also passes volcl's
+    self-test). The same objects are handed out every time."""
     return devmod.list_devices()
 
 

@@ -18,7 +18,7 @@ import signal
 import sys
 import time
 import traceback
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from . import checkpoint
@@ -37,10 +37,41 @@ class Job:
     spp: int | None = None
     seconds: float | None = None
     error: str = ""
+    defines: dict | None = None     # this job's -D values (a sweep's set), None: the batch's
+    swept: dict = field(default_factory=dict)   # the values of `defines` that vary in the sweep
 
     @property
     def failed(self) -> bool:
         return self.status == "FAILED"
+
+    @property
+    def label(self) -> str:
+        """The scene, with the swept values of this job ('fog.xml [frame=3]')."""
+        swept = " ".join(f"{k}={v}" for k, v in self.swept.items())
+        return self.scene + (f" [{swept}]" if swept else "")
+
+
+def make_jobs(scenes, scene_options: SceneOptions, output: OutputOptions) -> list[Job]:
+    """The batch's jobs: each scene once, or once per set of a sweep (-D ranges, --sweep), named
+    after the scene and the swept values."""
+    from . import sweep
+    sets = sweep.combine(scene_options.defines, scene_options.sweep)
+    names = sweep.varying(sets)
+    one_output = output.output if len(scenes) == 1 else None
+    if output.output is not None and len(scenes) > 1:
+        output_paths(scenes, output.output, output.output_dir)     # the error it gives
+    base = [Path(one_output)] if one_output is not None else output_paths(scenes, None, output.output_dir)
+    jobs, taken = [], {}
+    for scene, out in zip(scenes, base):
+        for values in sets:
+            path = out.with_name(out.stem + sweep.suffix(values, names, sets) + out.suffix) if names else out
+            if path in taken:
+                raise VolclError(f"{scene} with {values} and {taken[path]} would both write {path}; a sweep "
+                                 "lists each set of values once")
+            taken[path] = f"{scene} with {values}"
+            jobs.append(Job(str(scene), path, defines=values if names else None,
+                            swept={n: values[n] for n in names if n in values}))
+    return jobs
 
 
 def output_paths(scenes, output=None, output_dir=None, suffix=".exr") -> list[Path]:
@@ -139,6 +170,14 @@ class Progress:
             from tqdm import tqdm
             self.bar = tqdm(total=total, initial=done, desc=name, unit="spp", leave=False, file=sys.stderr)
 
+    tiles_total = 0
+
+    def tile(self, job):
+        """A tile of the round under way is in (renders on several devices or a cluster)."""
+        if self.bar is not None and self.tiles_total:
+            self._tiles = getattr(self, "_tiles", 0) % self.tiles_total + 1
+            self.bar.set_postfix_str(f"tiles {self._tiles}/{self.tiles_total}", refresh=True)
+
     def update(self, n):
         self.done += n
         if self.bar is not None:
@@ -186,20 +225,29 @@ def load_scene(path, options: SceneOptions):
                    warn=lambda w: print(f"warning: {w}", file=sys.stderr))
 
 
-def render_job(job: Job, device, stop: StopRequest, scene_options: SceneOptions, render: RenderOptions,
-               output: OutputOptions):
-    """Render one scene into job.output, updating job. Raises VolclError for what a user can fix."""
+def _notify(text: str):
+    print(f"volcl: warning: {text}", file=sys.stderr, flush=True)
+
+
+def render_job(job: Job, devices, stop: StopRequest, scene_options: SceneOptions, render: RenderOptions,
+               output: OutputOptions, executor=None, position: str = ""):
+    """Render one scene into job.output, updating job, on `devices` (a list of volcl Devices: one
+    device, or a render shared by several, volcl.rounds) or on `executor`'s workers (a cluster).
+    Raises VolclError for what a user can fix."""
     from .image import check_writable, write_image
     from .renderer import Renderer
+    from .rounds import WorkersFailed, renderer_for
     out = check_writable(job.output)
+    if job.defines is not None:
+        scene_options = replace(scene_options, defines=job.defines)
     scene = load_scene(job.scene, scene_options)
     defines = scene_options.defines
     # --spp caps --time-limit and --target-error; without it the scene's spp caps a time limit (the
     # render stops at whichever comes first), while a target error runs until it is met
     spp = render.spp or (None if render.target_error else scene.spp)
     estimator = render.estimator
-    if not estimator.nee and any(e.kind in ("point", "directional") for e in scene.model.emitters):
-        print(f"volcl: warning: {job.scene}: with --nee off, point and directional lights are never found (no "
+    if not estimator.nee and any(e.kind in ("point", "spot", "directional") for e in scene.model.emitters):
+        print(f"volcl: warning: {job.scene}: with --nee off, point, spot and directional lights are never found (no "
               "path can hit them)", file=sys.stderr)
     ckpt = checkpoint.path_for(out)
     state = meta = None
@@ -211,7 +259,8 @@ def render_job(job: Job, device, stop: StopRequest, scene_options: SceneOptions,
             print(f"{out}: already rendered with {spp} spp or more; kept", flush=True)
             return
     seed = render.seed if render.seed is not None else (meta["seed"] if meta else None)
-    renderer = Renderer(scene, device=device, features=render.features, seed=seed, estimator=estimator)
+    renderer = renderer_for(scene, devices, executor, seed=seed, estimator=estimator, features=render.features,
+                            tile_size=render.tile_size, notify=_notify)
     ident = checkpoint.identity(renderer, job.scene, defines)
     if state is not None:
         checkpoint.check(ckpt, meta, ident, renderer.seed)
@@ -220,7 +269,11 @@ def render_job(job: Job, device, stop: StopRequest, scene_options: SceneOptions,
     elif ckpt.is_file():
         print(f"volcl: warning: {ckpt} exists and is ignored (--resume continues from it); it will be "
               "replaced", file=sys.stderr)
-    if output.verbose:
+    if output.verbose and not isinstance(renderer, Renderer):
+        print(f"{job.scene}: {renderer.packed.triangle_count} triangles, {renderer.packed.sphere_count} spheres, "
+              f"BVH {renderer.packed.bvh_seconds:.2f} s, {len(renderer.tile_list)} tiles on "
+              f"{renderer.device_label}", file=sys.stderr)
+    elif output.verbose:
         if not renderer.built:
             build = "kernel program reused (built earlier in this run)"
         elif renderer.build_was_cold:
@@ -245,11 +298,18 @@ def render_job(job: Job, device, stop: StopRequest, scene_options: SceneOptions,
             last_save = time.monotonic()
         return stop.requested
 
-    progress = Progress(Path(job.scene).name, renderer.samples_done, spp, output.quiet)
+    name = Path(job.scene).name + "".join(f" {k}={v}" for k, v in job.swept.items())
+    progress = Progress(position + name, renderer.samples_done, spp, output.quiet)
+    if hasattr(renderer, "tile_list"):
+        progress.tiles_total = len(renderer.tile_list)
+        renderer.on_tile = progress.tile
+    failed = None
     try:
         result = renderer.render(None if spp is None else max(spp - renderer.samples_done, 0),
                                  progress=progress.update, stop=after_pass, time_limit=render.time_limit,
                                  target_error=render.target_error, min_spp=render.min_spp)
+    except WorkersFailed as exc:        # every device (worker) failed: keep what every pixel has
+        failed, result = exc, exc.result
     finally:
         progress.close()
     result.info["spp_requested"] = spp or 0     # the total asked for, across resumed sessions
@@ -265,6 +325,9 @@ def render_job(job: Job, device, stop: StopRequest, scene_options: SceneOptions,
     if complete and not output.keep_checkpoint and ckpt.is_file():
         ckpt.unlink()
     job.spp, job.seconds = result.spp, result.seconds
+    if failed is not None:
+        kept = f" and {ckpt} (continue with --resume)" if interval is not None else ""
+        raise VolclError(f"{failed}; wrote the image of the {result.spp} spp every pixel has to {out}{kept}")
     if complete:
         job.status = f"ok (resumed at {resumed_at} spp)" if resumed_at else "ok"
     else:
@@ -273,18 +336,28 @@ def render_job(job: Job, device, stop: StopRequest, scene_options: SceneOptions,
         print(f"volcl: interrupted after {result.spp} spp; wrote {out}{kept}", file=sys.stderr, flush=True)
     print(f"{out}: {result.spp} spp in {result.seconds:.2f} s ({_STOPPED[result.stop_reason]}), "
           f"{result.samples_per_second / 1e6:.2f} M samples/s, relative error {100 * result.rel_error:.2f}%, "
-          f"invalid samples {result.invalid}, tracking cut-offs {result.tracking_cutoffs}, device {result.device}, "
+          f"invalid samples {result.invalid}, tracking cut-offs {result.tracking_cutoffs}, {_devices_text(result)}, "
           f"features {result.stats['features']}", flush=True)
 
 
+def _devices_text(result) -> str:
+    """'device D' or 'devices D1 (52%), D2 (48%)', with the devices that failed."""
+    if not result.shares:
+        return f"device {result.device}"
+    parts = [f"{label} ({100 * share:.0f}%)" for label, share in result.shares.items()]
+    failed = [f"{label} failed: {why}" for label, why in result.info.get("failures", [])]
+    noun = "workers" if result.info.get("cluster") else "devices"
+    return f"{noun} {', '.join(parts)}" + (f" [{'; '.join(failed)}]" if failed else "")
+
+
 _STOPPED = {"spp": "spp reached", "time": "time limit reached", "error": "target error reached",
-            "stopped": "interrupted"}
+            "stopped": "interrupted", "failed": "every device failed"}
 
 
 def print_table(jobs: list[Job], file=sys.stdout):
     rows = [("scene", "output", "spp", "seconds", "status")]
     for j in jobs:
-        rows.append((j.scene, str(j.output), "-" if j.spp is None else str(j.spp),
+        rows.append((j.label, str(j.output), "-" if j.spp is None else str(j.spp),
                      "-" if j.seconds is None else f"{j.seconds:.2f}", j.status))
     widths = [max(len(r[i]) for r in rows) for i in range(4)]
     for r in rows:
@@ -292,43 +365,63 @@ def print_table(jobs: list[Job], file=sys.stdout):
                         for i, (c, w) in enumerate(zip(r[:4], widths))) + "  " + r[4], file=file)
     for j in jobs:
         if j.failed:
-            print(f"FAILED {j.scene}: {j.error}", file=file)
+            print(f"FAILED {j.label}: {j.error}", file=file)
 
 
 def run(scenes: list, device=None, scene_options: SceneOptions | None = None,
-        render: RenderOptions | None = None, output: OutputOptions | None = None) -> int:
-    """Render every scene file of `scenes` on `device` (a volcl.Device, a selector or None); the
-    exit status: 0, EXIT_FAILED if a scene failed, 128 + the signal number if interrupted."""
+        render: RenderOptions | None = None, output: OutputOptions | None = None, scheduler=None) -> int:
+    """Render every scene file of `scenes` (each once per set of a sweep) on `device` (a
+    volcl.Device, a list of them, a selector such as 'all' or '0:0,0:1', or None:
+    volcl.device.resolve_many), or on the workers of a Dask cluster (`scheduler`: an address,
+    'local:N' or a distributed.Client; volcl.cluster). The exit status: 0, EXIT_FAILED if a scene
+    failed, 128 + the signal number if interrupted."""
     from . import device as devmod
     scene_options = scene_options or SceneOptions()
     render = render or RenderOptions()
     output = output or OutputOptions()
-    outs = output_paths(scenes, output.output, output.output_dir)
+    jobs = make_jobs(scenes, scene_options, output)
     if output.output_dir is not None:
         Path(output.output_dir).mkdir(parents=True, exist_ok=True)
-    jobs = [Job(str(s), o) for s, o in zip(scenes, outs)]
     single = len(jobs) == 1
+    client = None
     with StopRequest() as stop:
-        dev = devmod.resolve(device)
-        for job in jobs:
-            if stop.requested:
-                break
-            try:
-                render_job(job, dev, stop, scene_options, render, output)
-            except Exception as exc:
-                if single:
-                    raise
-                job.status = "FAILED"
-                job.error = str(exc) if isinstance(exc, VolclError) else f"{type(exc).__name__}: {exc}"
-                print(f"volcl: error: {job.scene}: {job.error}", file=sys.stderr, flush=True)
-                if output.verbose and not isinstance(exc, VolclError):
-                    traceback.print_exc()
+        try:
+            if scheduler is not None:
+                from . import cluster
+                client = cluster.connect(scheduler)
+                devices = None
+                cluster.wait_for_workers(client)
+                workers = cluster.describe(client)
+                print(f"volcl: cluster {client.scheduler.address}: {workers}", file=sys.stderr, flush=True)
+            else:
+                devices = devmod.resolve_many(device)
+            for i, job in enumerate(jobs):
+                if stop.requested:
+                    break
+                position = f"[{i + 1}/{len(jobs)}] " if len(jobs) > 1 else ""
+                executor = None if client is None else cluster.DaskExecutor(client)
+                try:
+                    render_job(job, devices, stop, scene_options, render, output, executor, position)
+                except Exception as exc:
+                    if single:
+                        raise
+                    job.status = "FAILED"
+                    job.error = str(exc) if isinstance(exc, VolclError) else f"{type(exc).__name__}: {exc}"
+                    print(f"volcl: error: {job.label}: {job.error}", file=sys.stderr, flush=True)
+                    if output.verbose and not isinstance(exc, VolclError):
+                        traceback.print_exc()
+                finally:
+                    if executor is not None:
+                        executor.close()
+        finally:
+            if client is not None and not isinstance(scheduler, type(client)):
+                cluster.close(client)
     if not single:
         done = sum(j.status.startswith(("ok", "done earlier")) for j in jobs)
         print(f"\n{done} of {len(jobs)} scenes rendered")
         print_table(jobs)
     if stop.requested:
-        left = [j.scene for j in jobs if j.status == "not rendered"]
+        left = [j.label for j in jobs if j.status == "not rendered"]
         if left:
             print(f"volcl: interrupted; not rendered: {', '.join(left)}", file=sys.stderr)
         return stop.exit_status

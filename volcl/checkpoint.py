@@ -74,7 +74,7 @@ def save(path, renderer, ident: dict, extra: dict | None = None) -> Path:
     state = renderer.state()
     meta = dict(ident, format=FORMAT, version=__version__, seed=state["seed"],
                 samples_done=state["samples_done"], seconds=state["seconds"],
-                device=f"{renderer.device.key} {renderer.device.name}", **(extra or {}))
+                device=renderer.device_label, **(extra or {}))
     buf = io.BytesIO()
     np.savez(buf, meta=np.array(json.dumps(meta)), **{k: state[k] for k in ARRAYS})
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)

@@ -5,6 +5,7 @@ import argparse
 import math
 import sys
 import time
+import warnings
 from pathlib import Path
 
 from . import __version__
@@ -62,29 +63,70 @@ def cmd_render(args):
                            checkpoint_every=args.checkpoint_every, resume=args.resume,
                            keep_checkpoint=args.keep_checkpoint, quiet=args.quiet, verbose=args.verbose)
     render = RenderOptions(spp=args.spp, seed=args.seed, time_limit=args.time_limit, target_error=args.target_error,
-                           min_spp=args.min_spp, estimator=_estimator(args), features=_features(args))
-    return batch.run(args.scenes, args.device, _scene_options(args), render, output)
+                           min_spp=args.min_spp, estimator=_estimator(args), features=_features(args),
+                           tile_size=args.tile_size)
+    scene_options = _scene_options(args)
+    if args.sweep:
+        from dataclasses import replace
+        scene_options = replace(scene_options, sweep=Path(args.sweep))
+    if args.scheduler and args.scheduler.startswith("local:"):
+        import logging      # the cluster is this command's own: its workers' comings and goings are noise
+        logging.getLogger("distributed").setLevel(logging.WARNING)
+    if args.scheduler and args.device:
+        raise VolclError("--scheduler renders on the cluster's workers, each on the device it chose (start them "
+                         "with `volcl worker ADDRESS --device ...`); --device is for renders on this machine")
+    return batch.run(args.scenes, args.device, scene_options, render, output, scheduler=args.scheduler)
+
+
+def cmd_worker(args):
+    """`volcl worker ADDRESS`: a Dask worker (distributed's own command) with volcl's preload."""
+    import os
+    try:
+        import distributed  # noqa: F401
+    except ImportError:
+        raise VolclError("volcl worker needs Dask distributed: pip install 'volcl[cluster]'") from None
+    env = dict(os.environ)
+    if args.device:
+        env["VOLCL_DEVICE"] = args.device
+    extra = list(args.dask_args)
+    # dask worker's own options before --preload: what follows a preload is the preload's
+    cmd = [sys.executable, "-m", "distributed.cli.dask_worker", args.scheduler, "--nthreads", str(args.nthreads),
+           *extra, "--preload", "volcl.cluster"]
+    os.execvpe(sys.executable, cmd, env)
 
 
 def cmd_devices(args):
-    from .device import kernels_build, list_devices
+    from . import selftest
+    from .device import is_simulator, kernels_build, list_devices
     devs = list_devices()
     if not devs:
         from .device import INSTALL_HINT
         print(f"no OpenCL platform found; {INSTALL_HINT}")
         return 1
-    print(f"{'index':6} {'type':5} {'units':>5} {'memory':>9}  {'OpenCL C':12} {'kernels':8} name (vendor, platform)")
+    print(f"{'index':6} {'type':5} {'units':>5} {'memory':>9}  {'OpenCL C':12} {'kernels':8} {'self-test':10} "
+          "name (vendor, platform)")
     for d in devs:
         dev = d.device
         ok, why = kernels_build(d)
+        test = None
+        if ok and not is_simulator(d):
+            test = selftest.run(d)
         mem = f"{dev.global_mem_size / 2**30:.1f} GiB"
         status = "build" if ok else "FAIL"
+        tested = "-" if test is None else (f"ok {test.seconds:.1f} s" if test.ok else "FAIL")
+        note = f": {why}" if not ok else (": simulator, not self-tested" if test is None else
+                                          ("" if test.ok else f": {test.message}"))
         print(f"{d.key:6} {d.kind:5} {dev.max_compute_units:5} {mem:>9}  {dev.opencl_c_version.replace('OpenCL C ', ''):12} "
-              f"{status:8} {d.name} ({dev.vendor.strip()}, {d.platform_name})" + ("" if ok else f": {why}"))
+              f"{status:8} {tested:10} {d.name} ({dev.vendor.strip()}, {d.platform_name}){note}", flush=True)
     return 0
 
 
 def _grid_text(volume):
+    if volume.kind == "sparse":
+        x, y, z = volume.sparse.padded_counts() * 8
+        c = volume.sparse.channels
+        return (f"sparse grid '{volume.grid_name}', {x}x{y}x{z} box in bricks of 8^3, "
+                f"{c} channel{'s' if c > 1 else ''}, {volume.filter}")
     if volume.kind != "grid":
         return "constant extinction"
     z, y, x, c = volume.data.shape
@@ -103,10 +145,15 @@ def cmd_info(args):
     cylinders = packed.stats.get("cylinders", 0)
     print(f"shapes     {len(scene.shapes)} ({packed.triangle_count} triangles, {packed.sphere_count} spheres"
           + (f", {cylinders} cylinders)" if cylinders else ")"))
-    kinds = ["area"] * sum(s.emitter_radiance is not None for s in scene.shapes) + [e.kind for e in scene.emitters]
+    kinds = ["area"] * sum(s.emitter_radiance is not None for s in scene.shapes) + [
+        f"envmap {e.image.shape[1]}x{e.image.shape[0]}, {packed.arrays['env_data'].nbytes / 2**20:.1f} MiB"
+        if e.kind == "envmap" else e.kind for e in scene.emitters]
     print(f"emitters   {len(kinds)}" + (f" ({', '.join(kinds)})" if kinds else ""))
     media_kinds = [m.kind + (f" ({_grid_text(m.sigma_t)})" if m.kind == "heterogeneous" else "") for m in scene.media]
     print(f"media      {len(scene.media)}" + (f": {', '.join(media_kinds)}" if media_kinds else ""))
+    from .grids import grid_cost_text
+    for cost in packed.stats.get("sparse_grids", ()):
+        print(f"sparse     {grid_cost_text(cost)}")
     print(f"features   {describe(feats)}")
     print("flags      " + " ".join(f"VOLCL_HAS_{n}={int(feats[n])}" for n in FLAGS))
     if not args.no_build:
@@ -163,6 +210,21 @@ def cmd_converge(args):
     return 0
 
 
+def _show_skipped_devices():
+    """A device the default choice passes over (volcl.device.DeviceSkipped) is named on stderr as
+    `volcl: warning: ...`, every time, instead of in Python's warning format."""
+    from .device import DeviceSkipped
+    shown = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, DeviceSkipped):
+            print(f"volcl: warning: {message}", file=sys.stderr, flush=True)
+        else:
+            shown(message, category, filename, lineno, file, line)
+    warnings.showwarning = show
+    warnings.simplefilter("always", DeviceSkipped)
+
+
 def main(argv=None):
     from .estimator import CHOICES
     p = argparse.ArgumentParser(prog="volcl", description="volcl: a volumetric path tracer on OpenCL")
@@ -174,7 +236,9 @@ def main(argv=None):
                         help="override a scene <default> parameter")
         sp.add_argument("--width", type=int)
         sp.add_argument("--height", type=int)
-        sp.add_argument("--device", help="device index P:D, name substring, 'cpu' or 'gpu' (default: $VOLCL_DEVICE)")
+        sp.add_argument("--device", help="device index P:D, name substring, 'cpu' or 'gpu' (default: $VOLCL_DEVICE)"
+                        + ("; 'all' or a list 'A,B,...': one render on several devices" if sp.prog.endswith("render")
+                           else "; of a list, the first"))
         sp.add_argument("--features", help="'all': compile every feature instead of only the scene's")
         sp.add_argument("--sensor", type=int, metavar="N",
                         help="render the scene's sensor N (0-based, in file order; default 0)")
@@ -186,8 +250,8 @@ def main(argv=None):
         sp.add_argument("--mis", choices=("on", "off"), default="on",
                         help="combine light sampling with BSDF / phase sampling by MIS (default on)")
         sp.add_argument("--equiangular", choices=("auto", "on", "off"), default="auto",
-                        help="equiangular sampling towards point lights in media; auto: where a point "
-                             "light is inside a medium (default auto)")
+                        help="equiangular sampling towards point and spot lights in media; auto: where "
+                             "such a light is inside a medium (default auto)")
         sp.add_argument("--equiangular-mis", choices=("two", "one"), default="two",
                         help="combine equiangular and distance samples by two-sample (default) or "
                              "one-sample MIS")
@@ -212,9 +276,27 @@ def main(argv=None):
                    help="stop once the image's estimated relative error is at most E (e.g. 0.02)")
     r.add_argument("--min-spp", type=int, default=16, metavar="N",
                    help="samples per pixel before --target-error trusts the estimate (default 16)")
+    r.add_argument("--tile-size", type=int, metavar="PIXELS",
+                   help="tile size of a render on several devices (default: 8 or more tiles per device, "
+                        "at most 64 pixels square)")
+    r.add_argument("--sweep", metavar="FILE",
+                   help="render each scene once per line of FILE, a set of -D values (name=value ...); "
+                        "-D name=A..B[:STEP] sweeps integers too")
+    r.add_argument("--scheduler", metavar="ADDRESS",
+                   help="render on a Dask cluster: its scheduler's address (tcp://host:8786), or local:N "
+                        "for N single-threaded worker processes on this machine")
     estimator_opts(r)
     scene_opts(r)
     r.set_defaults(func=cmd_render)
+
+    w = sub.add_parser("worker", help="a Dask worker for `volcl render --scheduler` (dask worker with volcl's preload)",
+                       epilog="Options after -- go to `dask worker` (--name, --memory-limit, ...).")
+    w.add_argument("scheduler", metavar="ADDRESS", help="the scheduler's address, e.g. tcp://10.0.0.1:8786")
+    w.add_argument("--nthreads", type=int, default=1,
+                   help="render threads; each takes one of the worker's devices in turn (default 1)")
+    w.add_argument("--device", help="the devices this worker renders on (as volcl render --device; default: "
+                                    "$VOLCL_DEVICE, else the first device whose kernels build)")
+    w.set_defaults(func=cmd_worker)
 
     c = sub.add_parser("converge", help="error against render time for each estimator choice that applies")
     c.add_argument("scene")
@@ -236,7 +318,8 @@ def main(argv=None):
     scene_opts(c)
     c.set_defaults(func=cmd_converge)
 
-    d = sub.add_parser("devices", help="list OpenCL devices and whether volcl's kernels build on them")
+    d = sub.add_parser("devices", help="list OpenCL devices, whether volcl's kernels build on them and "
+                                      "whether they pass its self-test")
     d.set_defaults(func=cmd_devices)
 
     i = sub.add_parser("info", help="what a scene contains and which kernel features it compiles")
@@ -253,9 +336,16 @@ def main(argv=None):
     t.add_argument("-D", "--define", action="append", metavar="NAME=VALUE")
     t.set_defaults(func=cmd_test)
 
+    argv = list(sys.argv[1:] if argv is None else argv)
+    passthrough = []
+    if argv[:1] == ["worker"] and "--" in argv:     # the rest is dask worker's
+        passthrough, argv = argv[argv.index("--") + 1:], argv[:argv.index("--")]
     args = p.parse_args(argv)
+    args.dask_args = passthrough
     try:
-        return args.func(args)
+        with warnings.catch_warnings():
+            _show_skipped_devices()
+            return args.func(args)
     except VolclError as exc:
         print(f"volcl: error: {exc}", file=sys.stderr)
         return 2

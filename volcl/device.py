@@ -7,18 +7,22 @@ each program once and never piles up contexts. What belongs to one scene (its bu
 render (its accumulators, its kernel object) lives in volcl.upload and volcl.renderer, and goes
 when they go.
 
-A device is chosen by proving that a kernel builds on it, never by its name: some drivers list a
-device whose compiler then fails every build.
+A device is chosen by proving that volcl's kernels build on it and render known answers right
+(volcl/selftest.py), never by its name: some drivers list a device whose compiler then fails every
+build, and one compiler built kernels that computed wrong images.
 """
 from __future__ import annotations
 
 import os
 import threading
+import warnings
 
 from .errors import VolclError
 from .opencl import cl
 from .program import ENTRY_FILE, ProgramCache, program_key
 
+# the --device value for every device volcl may render on (a render on several devices, volcl.rounds)
+ALL = "all"
 INSTALL_HINT = ("install an OpenCL driver, e.g. on Debian: apt-get install pocl-opencl-icd "
                 "(and binutils, which PoCL needs to link kernels)")
 
@@ -36,6 +40,7 @@ class Device:
         self._queue = None
         self._programs = None
         self._check = None          # (ok, why) of the build check, once made
+        self._trusted = None        # (ok, why) of check(): build check and self-test, once made
 
     def __repr__(self) -> str:
         return f"<volcl.Device {self.key} {self.name!r} ({self.kind}, {self.platform_name})>"
@@ -150,6 +155,39 @@ def kernels_build(dev: Device) -> tuple[bool, str]:
     return dev._check
 
 
+class DeviceSkipped(UserWarning):
+    """A device the default choice passed over because volcl's kernels fail on it."""
+
+
+def is_simulator(dev: Device) -> bool:
+    """Oclgrind simulates a device thousands of times slower than any real one: it is used only
+    when selected by name, and not self-tested (the test would take many minutes)."""
+    return "oclgrind" in dev.platform_name.lower()
+
+
+def check(dev: Device) -> tuple[bool, str]:
+    """Whether volcl can trust this device: its kernels build (every feature on) and it passes the
+    self-test (volcl/selftest.py); otherwise why not. Checked once per device and process."""
+    if dev._trusted is None:
+        ok, why = kernels_build(dev)
+        if not ok:
+            why = f"kernels do not build: {why}"
+        elif not is_simulator(dev):
+            from . import selftest
+            result = selftest.run(dev)
+            ok, why = result.ok, ("" if result.ok else f"self-test failed: {result.message}")
+        dev._trusted = (ok, why)
+    return dev._trusted
+
+
+def _preference(dev: Device) -> tuple:
+    """Default order: GPUs, then PoCL's CPU device, then other devices in platform order. On CPUs
+    PoCL rendered as fast as Intel's runtime or faster on every scene measured (README, "Throughput
+    on each implementation"), and the loader's platform order follows the order of files in a
+    folder, which is no order at all."""
+    return (dev.kind != "gpu", "portable computing language" not in dev.platform_name.lower())
+
+
 def _match(devs: list[Device], sel: str) -> list[Device]:
     sel = sel.strip()
     if sel.lower() in ("cpu", "gpu"):
@@ -163,8 +201,13 @@ def _match(devs: list[Device], sel: str) -> list[Device]:
 
 def choose(selector: str | None = None) -> Device:
     """The device to render on: `selector` (or VOLCL_DEVICE) narrows the candidates; among them the
-    first whose kernels build wins, GPUs before other devices."""
+    first that passes check() (kernels build, self-test passes) wins, in _preference's order. Each
+    candidate passed over is named in a DeviceSkipped warning; simulators are candidates only when
+    the selector names them. A selector of several devices ('all', 'A,B') gives the first of them
+    (choose_many gives them all)."""
     selector = selector or os.environ.get("VOLCL_DEVICE") or None
+    if selector and (selector.strip() == ALL or "," in selector):
+        return choose_many(selector)[0]         # what renders on one device takes of a set
     devs = list_devices()
     if not devs:
         raise VolclError(f"no OpenCL device found; {INSTALL_HINT}")
@@ -175,19 +218,82 @@ def choose(selector: str | None = None) -> Device:
             raise VolclError(f"no OpenCL device matches --device {selector!r}; available: {listing}; "
                              "select by index 'P:D', a name substring, 'cpu' or 'gpu'")
     else:
-        candidates = sorted(devs, key=lambda d: d.kind != "gpu")
+        candidates = sorted((d for d in devs if not is_simulator(d)), key=_preference)
     failures = []
     for d in candidates:
-        ok, why = kernels_build(d)
+        ok, why = check(d)
         if ok:
             return d
-        failures.append(f"{d.key} {d.name}: {why}")
-    raise VolclError("volcl's kernels build on no OpenCL device (" + "; ".join(failures) + f"); {INSTALL_HINT}")
+        failures.append(f"{d.key} {d.name} ({d.platform_name}): {why}")
+        warnings.warn(f"skipping OpenCL device {failures[-1]}", DeviceSkipped, stacklevel=2)
+    raise VolclError("no OpenCL device passes volcl's checks (" + "; ".join(failures) + f"); {INSTALL_HINT}")
+
+
+def usable(dev: Device) -> tuple[bool, str]:
+    """Whether volcl may render on this device as one of 'all' (its kernels build and it passes the
+    self-test; a simulator never does), and why not."""
+    if is_simulator(dev):
+        return False, "a simulator, used only when named"
+    return check(dev)
+
+
+def choose_many(selector: str | None = None) -> list[Device]:
+    """The devices of one render: 'all' (every device volcl may render on), 'A,B,...' (each part
+    chosen as `choose` chooses), or one selector (one device). None: VOLCL_DEVICE, else the one
+    device `choose` picks."""
+    selector = selector or os.environ.get("VOLCL_DEVICE") or None
+    if selector is None:
+        return [choose()]
+    parts = [p.strip() for p in selector.split(",")]
+    if any(not p for p in parts):
+        raise VolclError(f"--device {selector!r}: an empty name in the list; give 'all', one device "
+                         "('P:D', a name substring, 'cpu', 'gpu') or several separated by commas ('0:0,0:1')")
+    if parts == [ALL]:
+        devs = list_devices()
+        if not devs:
+            raise VolclError(f"no OpenCL device found; {INSTALL_HINT}")
+        good, failures = [], []
+        for d in devs:
+            ok, why = usable(d)
+            (good.append(d) if ok else failures.append(f"{d.key} {d.name} ({d.platform_name}): {why}"))
+        if not good:
+            raise VolclError("no OpenCL device passes volcl's checks (" + "; ".join(failures) + f"); {INSTALL_HINT}")
+        for f in failures:
+            warnings.warn(f"--device all: skipping OpenCL device {f}", DeviceSkipped, stacklevel=2)
+        return good
+    if ALL in parts:
+        raise VolclError(f"--device {selector!r}: 'all' stands alone, not in a list")
+    return _distinct([choose(p) for p in parts], selector)
+
+
+def _distinct(devs: list, what) -> list:
+    seen = set()
+    for d in devs:
+        if id(d) in seen:
+            raise VolclError(f"--device {what!r} names device {d.key} {d.name} twice; name each device once")
+        seen.add(id(d))
+    return devs
+
+
+def resolve_many(device=None) -> list[Device]:
+    """The devices of one render from what a caller may pass: a Device, a list of Devices and
+    selectors, a selector string ('all', 'A,B', 'P:D', a name substring, 'cpu', 'gpu') or None
+    (VOLCL_DEVICE, else the first device whose kernels build)."""
+    if isinstance(device, Device):
+        return [device]
+    if device is None or isinstance(device, str):
+        return choose_many(device)
+    if isinstance(device, (list, tuple)):
+        if not device:
+            raise VolclError("device: an empty list of devices")
+        return _distinct([d for item in device for d in resolve_many(item)], device)
+    raise TypeError(f"device: expected a volcl Device, a list of them, a selector string or None, not "
+                    f"{type(device).__name__}")
 
 
 def resolve(device=None) -> Device:
     """A Device from what a caller may pass: a Device, a selector string ('P:D', a name
-    substring, 'cpu', 'gpu'), or None (VOLCL_DEVICE, else the first device whose kernels build)."""
+    substring, 'cpu', 'gpu'), or None (VOLCL_DEVICE, else the first device choose() trusts)."""
     if isinstance(device, Device):
         return device
     if device is None or isinstance(device, str):
@@ -199,22 +305,29 @@ def _size(n: int) -> str:
     return f"{n / 2**20:.1f} MiB" if n < 2**30 else f"{n / 2**30:.2f} GiB"
 
 
-def check_fits(info: Device, buffers: dict[str, int], accumulator_bytes: int = 0) -> None:
+# what to cut down when one buffer is too large
+_FEWER = {"texels": "smaller or fewer textures", "tri_uvs": "fewer textured triangles",
+          "grid_data": "smaller volume grids", "env_data": "a smaller environment map"}
+
+
+def check_fits(info: Device, buffers: dict[str, int], accumulator_bytes: int = 0, notes: str = "") -> None:
     """Raise VolclError when a scene's buffers (name -> bytes) cannot live on the device: one of them
     above its largest single allocation, or all of them (with the image accumulators) above its
     global memory. Checked before anything is uploaded, so the user gets the numbers instead of a
-    driver's out-of-resources error (or a crash) halfway through."""
+    driver's out-of-resources error (or a crash) halfway through. `notes` (what the largest parts
+    cost, e.g. sparse grids' bytes per active voxel) ends the message."""
     dev = info.device
     max_alloc, global_mem = int(dev.max_mem_alloc_size), int(dev.global_mem_size)
     name, biggest = max(buffers.items(), key=lambda item: item[1])
     if biggest > max_alloc:
+        fewer = _FEWER.get(name, "fewer triangles")
         raise VolclError(f"the scene is too large for device {info.key} {info.name}: its {name} buffer "
                          f"needs {_size(biggest)} ({biggest} bytes), but the device allocates at most "
                          f"{_size(max_alloc)} ({max_alloc} bytes) in one buffer; simplify the scene "
-                         f"(fewer triangles) or choose a device with more memory (--device)")
+                         f"({fewer}) or choose a device with more memory (--device)" + notes)
     total = sum(buffers.values()) + accumulator_bytes
     if total > global_mem:
         raise VolclError(f"the scene is too large for device {info.key} {info.name}: its buffers and "
                          f"image accumulators need {_size(total)} ({total} bytes), but the device has "
                          f"{_size(global_mem)} ({global_mem} bytes) of global memory; simplify the scene "
-                         f"or lower the resolution, or choose a device with more memory (--device)")
+                         f"or lower the resolution, or choose a device with more memory (--device)" + notes)

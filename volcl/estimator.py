@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from .errors import VolclError
-from .features import detect
+from .features import POINT_LIKE, detect
 from .scene.model import Scene
 
 EQUIANGULAR_CHOICES = ("auto", "on", "off")
@@ -20,7 +20,7 @@ EQUIANGULAR_MODES = {"off": 0, "two": 1, "one": 2}
 class Estimator:
     nee: bool = True            # next-event estimation (light sampling)
     mis: bool = True            # combine NEE with BSDF / phase sampling (and equiangular with distance) by MIS
-    equiangular: str = "auto"   # towards point lights in media: 'on', 'off', or 'auto' (on for point lights inside media)
+    equiangular: str = "auto"   # towards point and spot lights in media: 'on', 'off', or 'auto' (on for such lights inside media)
     equiangular_mis: str = "two"    # samples per segment in the equiangular / distance combination: 'two' or 'one'
 
     def __post_init__(self):
@@ -38,7 +38,7 @@ class Estimator:
         if not self.nee or self.equiangular == "off":
             return False
         if self.equiangular == "on":
-            return any(e.kind == "point" for e in scene.emitters) and bool(scene.media)
+            return any(e.kind in POINT_LIKE for e in scene.emitters) and bool(scene.media)
         return bool((detected or detect(scene))["EQUIANGULAR"])
 
     def resolve(self, scene: Scene, features: dict | None = None, detected: dict | None = None) -> tuple[dict, dict]:
@@ -82,13 +82,13 @@ def applicable_choices(scene: Scene) -> list[str]:
     the delta lights; without them MIS changes nothing against NEE alone; equiangular sampling needs
     point lights and media."""
     kinds = {e.kind for e in scene.emitters}
-    hittable = any(s.emitter_radiance is not None for s in scene.shapes) or "constant" in kinds
-    delta = bool(kinds & {"point", "directional"})
+    hittable = any(s.emitter_radiance is not None for s in scene.shapes) or bool(kinds & {"constant", "envmap"})
+    delta = bool(kinds & {"point", "spot", "directional"})
     out = ["mis"]
     if hittable:
         out.append("nee-only")
         if not delta:
             out.append("bsdf-only")
-    if "point" in kinds and scene.media:
+    if kinds & set(POINT_LIKE) and scene.media:
         out += ["equiangular+mis", "equiangular+mis-1s", "equiangular-only"]
     return out

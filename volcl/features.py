@@ -8,24 +8,36 @@ from __future__ import annotations
 
 import numpy as np
 
+from .pack_materials import chain, textures_of
+from .phase import device_kind
 from .scene.model import Scene, Volume
 
 FLAGS = (
     "SPHERES",              # analytic sphere primitives
     "SHADING_NORMALS",      # interpolated vertex normals on some mesh
     "DIFFUSE", "DIELECTRIC", "CONDUCTOR", "NULL_BSDF",
-    "AREA_LIGHTS", "POINT_LIGHTS", "DIRECTIONAL_LIGHTS", "ENV_LIGHTS",
+    "AREA_LIGHTS", "POINT_LIGHTS", "DIRECTIONAL_LIGHTS",
+    "ENV_LIGHTS",           # an environment at infinity: a constant or an envmap
+    "ENVMAP",               # an image-based environment (Mitsuba's envmap): lookups and importance sampling
+    "SPOT_LIGHTS",          # Mitsuba's spot light
     "MEDIA",                # any participating medium
     "MEDIUM_BOUNDARIES",    # shapes that name an interior or exterior medium
     "CHROMATIC_MEDIA",      # a medium whose extinction differs between colour channels
     "HG",                   # an anisotropic (Henyey-Greenstein) phase function
     "EMISSIVE_MEDIA",       # a medium that emits light
     "GRID_MEDIA",           # a heterogeneous medium: grid lookups, delta and ratio tracking
+    "SPARSE_GRIDS",         # a grid in bricks (OpenVDB / NanoVDB files: kernels/grid.h)
     "EQUIANGULAR",          # equiangular sampling towards point lights in homogeneous media
     "CYLINDERS",            # analytic cylinder primitives (Mitsuba's cylinder)
     "THINLENS",             # a thin-lens camera (depth of field)
     "ORTHOGRAPHIC",         # an orthographic camera
     "DIRECT",               # Mitsuba's direct integrator instead of the volumetric path tracer
+    "ROUGHCONDUCTOR", "ROUGHDIELECTRIC", "PLASTIC", "ROUGHPLASTIC", "THINDIELECTRIC",
+    "MASK",                 # Mitsuba's mask (opacity) wrapper
+    "TEXTURES",             # a bsdf parameter given by a bitmap or checkerboard texture
+    "BUMP_MAPS",            # bump or normal maps
+    "PHASE_FAMILIES",       # phase functions beyond HG: Rayleigh, Draine, Cornette-Shanks, Fournier-Forand,
+                            # tabulated, blends, approximate Mie (one flag: volcl/phase.py, README)
 )
 
 
@@ -39,14 +51,19 @@ def _chromatic(sigma_t) -> bool:
     if isinstance(sigma_t, Volume):
         if sigma_t.kind == "const":
             return bool(np.ptp(sigma_t.value) > 0)
-        data = sigma_t.data
+        data = sigma_t.values()
         return data.shape[-1] == 3 and bool(np.any(data.max(axis=-1) != data.min(axis=-1)))
     return bool(np.ptp(np.asarray(sigma_t, dtype=float)) > 0)
 
 
+def _volumes_of(medium) -> list:
+    return [medium.sigma_t, medium.albedo, medium.emission_volume]
+
+
 def detect(scene: Scene) -> dict[str, bool]:
     """The features `scene` needs: every flag in FLAGS, True where some element uses it."""
-    bsdf_kinds = {s.bsdf.kind for s in scene.shapes}
+    bsdfs = [b for s in scene.shapes for b in chain(s.bsdf)]
+    bsdf_kinds = {b.kind for b in bsdfs}
     light_kinds = {e.kind for e in scene.emitters}
     media = _media_of(scene)
     f = dict.fromkeys(FLAGS, False)
@@ -60,18 +77,28 @@ def detect(scene: Scene) -> dict[str, bool]:
     f["DIELECTRIC"] = "dielectric" in bsdf_kinds
     f["CONDUCTOR"] = "conductor" in bsdf_kinds
     f["NULL_BSDF"] = "null" in bsdf_kinds
+    for kind in ("roughconductor", "roughdielectric", "plastic", "roughplastic", "thindielectric", "mask"):
+        f[kind.upper()] = kind in bsdf_kinds
+    # normal maps read theirs as colours; a spot may project one
+    f["TEXTURES"] = any(textures_of(b) for b in bsdfs) or any(e.texture is not None for e in scene.emitters)
+    f["BUMP_MAPS"] = bool(bsdf_kinds & {"bumpmap", "normalmap"})
     f["AREA_LIGHTS"] = any(s.emitter_radiance is not None for s in scene.shapes)
     f["POINT_LIGHTS"] = "point" in light_kinds
     f["DIRECTIONAL_LIGHTS"] = "directional" in light_kinds
-    f["ENV_LIGHTS"] = "constant" in light_kinds
+    f["ENV_LIGHTS"] = bool(light_kinds & {"constant", "envmap"})
+    f["ENVMAP"] = "envmap" in light_kinds
+    f["SPOT_LIGHTS"] = "spot" in light_kinds
     f["MEDIA"] = bool(media)
     f["MEDIUM_BOUNDARIES"] = any(s.interior is not None or s.exterior is not None for s in scene.shapes)
     f["CHROMATIC_MEDIA"] = any(_chromatic(m.sigma_t) for m in media)
-    f["HG"] = any(m.phase.kind == "hg" for m in media)
-    f["EMISSIVE_MEDIA"] = any(m.radiance is not None and np.any(np.asarray(m.radiance) > 0) for m in media)
+    phase_kinds = {device_kind(m.phase) for m in media}
+    f["HG"] = "hg" in phase_kinds
+    f["PHASE_FAMILIES"] = "lobes" in phase_kinds
+    f["EMISSIVE_MEDIA"] = any(m.emissive for m in media)
     f["GRID_MEDIA"] = any(m.kind == "heterogeneous" for m in media)
+    f["SPARSE_GRIDS"] = any(isinstance(v, Volume) and v.kind == "sparse" for m in media for v in _volumes_of(m))
     # the estimator's default ('auto'): worth compiling where a point light sits inside a medium
-    f["EQUIANGULAR"] = f["POINT_LIGHTS"] and any(m is not None for m in point_light_media(scene))
+    f["EQUIANGULAR"] = any(m is not None for m in point_light_media(scene))
     return f
 
 
@@ -169,9 +196,19 @@ def medium_at(scene: Scene, point) -> object:
     return max(votes.values(), key=lambda mv: mv[1])[0]
 
 
+POINT_LIKE = ("point", "spot")
+
+
+def escapes_unbounded(scene: Scene, point) -> bool:
+    """Whether some probe ray from `point` leaves the scene without meeting a shape that names a
+    medium: the medium around the point then reaches to infinity that way."""
+    o = np.asarray(point, np.float64)
+    return any(_first_transition(scene, o, d) is None for d in _PROBES)
+
+
 def point_light_media(scene: Scene) -> list:
-    """The medium around each point light (None: vacuum), in the order of scene.emitters' point lights."""
-    return [medium_at(scene, e.position) for e in scene.emitters if e.kind == "point"]
+    """The medium around each point or spot light (None: vacuum), in the order of scene.emitters."""
+    return [medium_at(scene, e.position) for e in scene.emitters if e.kind in POINT_LIKE]
 
 
 def all_features() -> dict[str, bool]:

@@ -39,10 +39,17 @@ LEAF_PACKET = np.dtype([("v", np.float32, (9, LEAF_WIDTH)), ("prim", np.int32, L
 TRIANGLE = np.dtype([
     ("p0", *f3), ("shape", np.int32),
     ("p1", *f3), ("normals", np.int32),
-    ("p2", *f3), ("pad0", np.int32),
+    ("p2", *f3), ("uvs", np.int32),
 ])
 
 TRIANGLE_NORMALS = np.dtype([("n0", *f3), ("n1", *f3), ("n2", *f3), ("pad0", np.int32, 3)])
+
+# corner texture coordinates of a triangle (kernels/texcoords.h)
+TRIANGLE_UV = np.dtype([("uv", np.float32, 6), ("pad0", np.float32, 2)])
+
+UV_MAP_KINDS = {"sphere": 0, "disk": 1}
+UV_MAP = np.dtype([("kind", np.int32), ("pad0", np.int32, 3),
+                   ("to_world", np.float32, 12), ("to_object", np.float32, 12)])
 
 SPHERE = np.dtype([
     ("center", *f3), ("radius", np.float32),
@@ -58,43 +65,86 @@ CYLINDER_CODE_BASE = 1 << 30
 
 SHAPE_INFO = np.dtype([
     ("bsdf", np.int32), ("light", np.int32), ("interior", np.int32), ("exterior", np.int32),
-    ("is_transition", np.int32), ("pad0", np.int32, 3),
+    ("is_transition", np.int32), ("uv_map", np.int32), ("pad0", np.int32, 2),
 ])
 
-BSDF_TYPES = {"diffuse": 0, "dielectric": 1, "conductor": 2, "null": 3}
+BSDF_TYPES = {"diffuse": 0, "dielectric": 1, "conductor": 2, "null": 3, "roughconductor": 4, "roughdielectric": 5,
+              "plastic": 6, "roughplastic": 7, "thindielectric": 8, "mask": 9, "bumpmap": 10, "normalmap": 11}
+BSDF_FLAGS = {"uv": 1, "uv_frame": 2, "passes": 4, "nonlinear": 8, "visible": 16, "shadowing": 32,
+              "flip_invalid": 64}
+MICROFACETS = {"beckmann": 0, "ggx": 1}
 BSDF = np.dtype([
     ("type", np.int32), ("twosided", np.int32), ("eta", np.float32), ("conductor_mirror", np.int32),
-    ("color", *f3), ("pad0", np.float32),
-    ("cond_eta", *f3), ("pad1", np.float32),
-    ("cond_k", *f3), ("pad2", np.float32),
+    ("color", *f3), ("color_tex", np.int32),
+    ("cond_eta", *f3), ("eta_tex", np.int32),
+    ("cond_k", *f3), ("k_tex", np.int32),
+    ("spec_r", *f3), ("spec_r_tex", np.int32),
+    ("spec_t", *f3), ("spec_t_tex", np.int32),
+    ("alpha_u", np.float32), ("alpha_v", np.float32), ("alpha_u_tex", np.int32), ("alpha_v_tex", np.int32),
+    ("distribution", np.int32), ("flags", np.int32), ("nested", np.int32), ("table", np.int32),
+    ("opacity", np.float32), ("opacity_tex", np.int32), ("scale", np.float32), ("map_tex", np.int32),
+    ("spec_weight", np.float32), ("internal_refl", np.float32), ("inv_eta2", np.float32), ("pad0", np.int32),
+])
+# the texture-index fields of a BSDF record, -1 for "the constant beside it"
+BSDF_TEXTURE_FIELDS = ("color_tex", "eta_tex", "k_tex", "spec_r_tex", "spec_t_tex", "alpha_u_tex", "alpha_v_tex",
+                       "opacity_tex", "map_tex")
+
+TEXTURE_TYPES = {"bitmap": 0, "checkerboard": 1}
+TEXTURE_FILTERS = {"bilinear": 0, "nearest": 1}
+TEXTURE_WRAPS = {"repeat": 0, "mirror": 1, "clamp": 2}
+TEXTURE = np.dtype([
+    ("type", np.int32), ("channels", np.int32), ("width", np.int32), ("height", np.int32),
+    ("data", np.int32), ("filter", np.int32), ("wrap", np.int32), ("child0", np.int32),
+    ("child1", np.int32), ("pad0", np.int32, 3),
+    ("to_uv", np.float32, 6), ("pad1", np.float32, 2),
+    ("color0", *f3), ("mean0", np.float32),
+    ("color1", *f3), ("mean1", np.float32),
 ])
 
-LIGHT_TYPES = {"area": 0, "point": 1, "directional": 2, "constant": 3}
+LIGHT_TYPES = {"area": 0, "point": 1, "directional": 2, "constant": 3, "envmap": 4, "spot": 5}
 LIGHT = np.dtype([
     ("type", np.int32), ("tri_start", np.int32), ("tri_count", np.int32), ("sphere", np.int32),
     ("value", *f3), ("area", np.float32),
     ("position", *f3), ("pad0", np.float32),
     ("direction", *f3), ("pad1", np.float32),
+    ("to_local", np.float32, 9),
+    ("cos_cutoff", np.float32), ("cos_beam", np.float32), ("cutoff", np.float32), ("inv_transition", np.float32),
+    ("env_res", np.int32, 2), ("env_data", np.int32), ("env_norm", np.float32), ("texture", np.int32), ("tan_cutoff", np.float32), ("pad2", np.int32),
 ])
 
 MEDIUM_TYPES = {"homogeneous": 0, "heterogeneous": 1}
-PHASE_TYPES = {"isotropic": 0, "hg": 1}
+# Medium.phase: isotropic and HG in the medium record itself, anything else a mixture of lobes
+PHASE_TYPES = {"isotropic": 0, "hg": 1, "lobes": 2}
 # Heterogeneous media name their grids (sigma_t_grid, albedo_grid), and `emission` holds the
 # radiance; homogeneous media use sigma_t, albedo, and emission = sigma_a * radiance.
+# A mixture phase is PHASE_LOBE records [phase_lobe, phase_lobe + phase_lobe_count).
 MEDIUM = np.dtype([
     ("type", np.int32), ("phase", np.int32), ("g", np.float32), ("sigma_t_grid", np.int32),
     ("sigma_t", *f3), ("albedo_grid", np.int32),
-    ("albedo", *f3), ("pad2", np.float32),
-    ("emission", *f3), ("pad3", np.float32),
+    ("albedo", *f3), ("phase_lobe", np.int32),
+    ("emission", *f3), ("phase_lobe_count", np.int32),
+    ("emission_mode", np.int32), ("emission_grid", np.int32), ("emission_scale", np.float32),
+    ("blackbody", np.int32), ("temperature_scale", np.float32), ("temperature_offset", np.float32),
+    ("emission_sampler", np.int32), ("pad0", np.int32),
+])
+EMISSION_MODES = {"none": 0, "radiance": 1, "temperature": 2}
+
+# One lobe of a mixture phase function (kernels/types.h says what `p` holds for each type); a
+# table is a piecewise-linear density at phase_tables[table ...]: knots, densities, CDF.
+LOBE_TYPES = {"isotropic": 0, "hg": 1, "rayleigh": 2, "draine": 3, "tabulated": 4, "fournier_forand": 5}
+PHASE_LOBE = np.dtype([
+    ("type", np.int32), ("weight", np.float32), ("table", np.int32), ("table_size", np.int32),
+    ("p", np.float32, 4),
 ])
 
 GRID_FILTERS = {"trilinear": 0, "nearest": 1}
+GRID_LAYOUTS = {"dense": 0, "sparse": 1}
 # A grid of 1 or 3 channels filling its unit cube; voxels and majorant cells live in one float
 # buffer at offsets `data` and `majorants` (see kernels/types.h).
 GRID_VOLUME = np.dtype([
     ("to_local", np.float32, 12), ("res", np.int32, 3), ("channels", np.int32),
     ("maj_res", np.int32, 3), ("filter", np.int32),
-    ("data", np.int32), ("majorants", np.int32), ("pad0", np.int32, 2),
+    ("data", np.int32), ("majorants", np.int32), ("layout", np.int32), ("pad0", np.int32),
 ])
 
 RENDER_PARAMS = np.dtype([
@@ -118,5 +168,6 @@ SHARED_STRUCTS = {
     "BvhWideNode": BVH_WIDE_NODE, "LeafPacket": LEAF_PACKET, "Triangle": TRIANGLE, "TriangleNormals": TRIANGLE_NORMALS, "Sphere": SPHERE,
     "Cylinder": CYLINDER,
     "ShapeInfo": SHAPE_INFO, "Bsdf": BSDF, "Light": LIGHT, "Medium": MEDIUM, "GridVolume": GRID_VOLUME,
-    "RenderParams": RENDER_PARAMS,
+    "RenderParams": RENDER_PARAMS, "TriangleUv": TRIANGLE_UV, "UvMap": UV_MAP, "Texture": TEXTURE,
+    "PhaseLobe": PHASE_LOBE,
 }

@@ -4,7 +4,7 @@ files (volcl.serialized), and the primitive shapes scenes name.
 Everything here is in object space; volcl.scene places meshes in the world. A mesh is a
 `TriangleMesh` of float64 vertices (n, 3), int64 faces (m, 3), optional per-vertex shading
 normals (n, 3), present only when the file itself stores them, and optional texture coordinates
-(n, 2) where the file has them (kept for textures; the kernels do not read them yet).
+(n, 2) where the file has them, as the file stores them (the Mitsuba dialect flips OBJ's v).
 """
 from __future__ import annotations
 
@@ -220,7 +220,7 @@ def _validated(mesh: TriangleMesh, path: str) -> TriangleMesh:
                              "fix the file or set face_normals=true", file=path)
         n = n / length[:, None]
     if uv is not None and not np.isfinite(uv).all():
-        uv = None       # unusable texture coordinates are dropped, not fatal: nothing reads them yet
+        uv = None       # unusable texture coordinates are dropped: textures then read barycentric ones
     return TriangleMesh(v, f, n, uv)
 
 
@@ -326,25 +326,27 @@ def _point(p) -> str:
 
 
 def rectangle() -> TriangleMesh:
-    """[-1, 1]^2 at z = 0; the winding makes the geometric normal +z."""
+    """[-1, 1]^2 at z = 0; the winding makes the geometric normal +z. Mitsuba's uvs: ((x + 1) / 2,
+    (y + 1) / 2)."""
     v = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], dtype=np.float64)
     f = np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int64)
-    return TriangleMesh(v, f)
+    return TriangleMesh(v, f, None, (v[:, :2] + 1.0) / 2.0)
 
 
 def cube() -> TriangleMesh:
-    """[-1, 1]^3 as 12 triangles wound so that every geometric normal points outward; flat."""
-    v = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=np.float64)
-    # Vertex index = 4 * (x > 0) + 2 * (y > 0) + (z > 0); each quad is counter-clockwise seen
-    # from outside.
-    quads = [(0, 1, 3, 2),   # -x
-             (4, 6, 7, 5),   # +x
-             (0, 4, 5, 1),   # -y
-             (2, 3, 7, 6),   # +y
-             (0, 2, 6, 4),   # -z
-             (1, 5, 7, 3)]   # +z
-    f = np.array([tri for a, b, c, d in quads for tri in ((a, b, c), (a, c, d))], dtype=np.int64)
-    return TriangleMesh(v, f)
+    """[-1, 1]^3 as Mitsuba's cube (src/shapes/cube.cpp): 24 corners (four per face, so that each
+    face has its own uvs over [0, 1]^2) and 12 triangles wound so that every geometric normal points
+    outward; flat."""
+    v = np.array([[1, -1, -1], [1, -1, 1], [-1, -1, 1], [-1, -1, -1],
+                  [1, 1, -1], [-1, 1, -1], [-1, 1, 1], [1, 1, 1],
+                  [1, -1, -1], [1, 1, -1], [1, 1, 1], [1, -1, 1],
+                  [1, -1, 1], [1, 1, 1], [-1, 1, 1], [-1, -1, 1],
+                  [-1, -1, 1], [-1, 1, 1], [-1, 1, -1], [-1, -1, -1],
+                  [1, 1, -1], [1, -1, -1], [-1, -1, -1], [-1, 1, -1]], dtype=np.float64)
+    uv = np.tile(np.array([[0, 1], [1, 1], [1, 0], [0, 0]], dtype=np.float64), (6, 1))
+    quads = np.arange(24).reshape(6, 4)
+    f = np.concatenate([quads[:, [0, 1, 2]], quads[:, [3, 0, 2]]], axis=1).reshape(-1, 3)
+    return TriangleMesh(v, f.astype(np.int64), None, uv)
 
 
 DISK_SEGMENTS = 512

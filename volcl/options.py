@@ -17,6 +17,7 @@ class SceneOptions:
     defines: dict = field(default_factory=dict)
     width: int | None = None
     height: int | None = None
+    sweep: Path | None = None       # a sweep file: one set of -D values a line (volcl.sweep)
     sensor: int | None = None
 
     def __post_init__(self):
@@ -39,8 +40,11 @@ class RenderOptions:
     min_spp: int = 16
     estimator: Estimator = field(default_factory=Estimator)
     features: dict | None = None
+    tile_size: int | None = None    # tiles of a render on several devices (None: chosen per image)
 
     def __post_init__(self):
+        if self.tile_size is not None and self.tile_size < 1:
+            raise VolclError(f"--tile-size {self.tile_size}: expected a positive pixel count")
         if self.spp is not None and self.spp < 1:
             raise VolclError(f"--spp {self.spp}: expected a positive sample count")
         if self.time_limit is not None and not self.time_limit > 0:

@@ -8,11 +8,14 @@ A `Packer` holds what depends on the scene's structure only (which objects exist
 uses which bsdf, light and media: the indices the arrays refer to each other by) and packs the
 arrays in parts, so that an edited value (volcl.params) repacks only the part it lives in:
 
-    geometry   triangles, normals, spheres, cylinders, BVH (nodes, leaves) vertex positions, transforms
-    lights     light records, area-light triangle CDFs              emitter values, geometry
+    geometry   triangles, normals, spheres, cylinders, BVH (nodes,   vertex positions, transforms
+               leaves), texture coordinates and parametrizations
+    lights     light records, area-light triangle CDFs, envmaps     emitter values, geometry
     shapes     per-shape bsdf, light and media indices              structure only
-    bsdfs      bsdf records                                         bsdf colours and IORs
-    media      media records, grid descriptors and values           media coefficients, phase
+    bsdfs      bsdf records, textures and texels, bsdf tables       bsdf colours, IORs, roughness,
+                                                                    texture data (volcl.pack_materials)
+    media      media records, grid descriptors and values,          media coefficients, phase
+               phase lobes and their tables
     camera     the reconstruction filter's table                    the film's filter
 and the RenderParams record, which is small and repacked with every part.
 """
@@ -24,28 +27,33 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import layout
+from . import envmap, layout
 from .bvh_wide import device_bvh, empty_wide
+from .errors import VolclError
 from .features import detect
 from .grids import GridPacker
 from .mesh import triangle_areas32
+from .pack_materials import MaterialPacker, reads_uv, transmits
+from .phase import PhasePacker
 from .scene.model import Camera, Filter, Scene
+from .scene import transform as tf
 from .scene.shapes import cylinder_bounds
 
 FILTER_TABLE_SIZE = 4097
 
 # part -> the arrays it packs, in the order parts are packed (shapes name the lights)
 PARTS = {
-    "geometry": ("nodes", "leaves", "triangles", "normals", "spheres", "cylinders"),
-    "lights": ("lights", "light_tri_cdf", "light_tris"),
+    "geometry": ("nodes", "leaves", "triangles", "normals", "spheres", "cylinders", "tri_uvs", "uv_maps"),
+    "lights": ("lights", "light_tri_cdf", "light_tris", "env_data"),
     "shapes": ("shapes",),
-    "bsdfs": ("bsdfs",),
-    "media": ("media", "grids", "grid_data"),
+    "bsdfs": ("bsdfs", "textures", "texels", "bsdf_tables"),
+    "media": ("media", "grids", "grid_data", "phase_lobes", "phase_tables"),
     "camera": ("filter_table",),
 }
 # the kernel's buffer arguments, in order (kernels/render.cl)
 ARG_ORDER = ("nodes", "leaves", "triangles", "normals", "spheres", "cylinders", "shapes", "bsdfs", "lights",
-             "light_tri_cdf", "light_tris", "media", "grids", "grid_data", "params", "filter_table")
+             "light_tri_cdf", "light_tris", "env_data", "media", "grids", "grid_data", "params", "filter_table",
+             "tri_uvs", "uv_maps", "textures", "texels", "bsdf_tables", "phase_lobes", "phase_tables")
 
 
 @dataclass
@@ -68,37 +76,22 @@ def _index_by_identity(objs):
     return index, out
 
 
-def _pack_bsdfs(bsdfs):
-    arr = np.zeros(max(len(bsdfs), 1), layout.BSDF)
-    for i, b in enumerate(bsdfs):
-        r = arr[i]
-        r["type"] = layout.BSDF_TYPES[b.kind]
-        r["twosided"] = int(b.twosided)
-        r["eta"] = b.int_ior / b.ext_ior
-        if b.kind == "diffuse":
-            r["color"] = b.reflectance
-        elif b.kind == "conductor":
-            r["color"] = b.specular_reflectance
-            r["conductor_mirror"] = int(b.eta is None)
-            if b.eta is not None:
-                r["cond_eta"], r["cond_k"] = b.eta, b.k
-    return arr
-
-
-def _pack_media(media, grids: GridPacker):
+def _pack_media(media, grids: GridPacker, phases: PhasePacker):
     arr = np.zeros(max(len(media), 1), layout.MEDIUM)
-    arr["sigma_t_grid"] = arr["albedo_grid"] = -1
+    arr["sigma_t_grid"] = arr["albedo_grid"] = arr["emission_grid"] = -1
+    arr["blackbody"] = arr["emission_sampler"] = -1
     for i, m in enumerate(media):
         r = arr[i]
         r["type"] = layout.MEDIUM_TYPES[m.kind]
-        r["phase"] = layout.PHASE_TYPES[m.phase.kind]
-        r["g"] = m.phase.g if m.phase.kind == "hg" else 0.0
+        r["phase"], r["g"], r["phase_lobe"], r["phase_lobe_count"] = phases.add(m.phase)
         if m.kind == "heterogeneous":
             # the scale goes into the grid values (and so into the majorants) once, here
             r["sigma_t_grid"] = grids.add(m.sigma_t, m.scale, tracked=True)
             r["albedo_grid"] = grids.add(m.albedo)
             if m.radiance is not None:
                 r["emission"] = m.radiance
+            if m.emission_kind != "none":
+                _pack_emission(r, m, grids)
             continue
         sigma_t = np.asarray(m.sigma_t, dtype=np.float64) * m.scale
         albedo = np.asarray(m.albedo, dtype=np.float64)
@@ -106,6 +99,28 @@ def _pack_media(media, grids: GridPacker):
         if m.radiance is not None:
             r["emission"] = sigma_t * (1.0 - albedo) * m.radiance
     return arr
+
+
+def _pack_spot(rec, e) -> None:
+    """Mitsuba's spot: position, the frame its falloff is measured in, and the falloff's constants
+    (kernels/lights.h spot_falloff)."""
+    rec["position"] = e.position
+    rec["to_local"] = np.linalg.inv(np.asarray(e.to_world, np.float64)[:3, :3]).reshape(9)
+    cutoff, beam = math.radians(e.cutoff_angle), math.radians(e.beam_width)
+    rec["cos_cutoff"], rec["cos_beam"], rec["cutoff"] = math.cos(cutoff), math.cos(beam), cutoff
+    rec["tan_cutoff"] = math.tan(cutoff)
+    # a beam as wide as the cutoff has no transition (never evaluated there: infinite is harmless)
+    rec["inv_transition"] = 1.0 / (cutoff - beam) if cutoff != beam else np.inf
+
+
+def _pack_emission(r, m, grids: GridPacker) -> None:
+    """A heterogeneous medium's spatially varying emission: its grid, scales and the blackbody table."""
+    r["emission_mode"] = layout.EMISSION_MODES[m.emission_kind]
+    r["emission_grid"] = grids.add(m.emission_volume)
+    r["emission_scale"] = m.emission_scale
+    if m.emission_kind == "temperature":
+        r["blackbody"] = grids.blackbody_table()
+        r["temperature_scale"], r["temperature_offset"] = m.temperature_scale, m.temperature_offset
 
 
 def filter_profile(f: Filter, x: np.ndarray) -> np.ndarray:
@@ -182,7 +197,15 @@ class Packer:
         self.max_leaf = max_leaf
         self.majorant_cells = majorant_cells
         self.shape_index = {id(s): i for i, s in enumerate(scene.shapes)}
-        self.bsdf_index, self.bsdfs = _index_by_identity(s.bsdf for s in scene.shapes)
+        # spots' projection textures share the texture buffers, after the bsdfs' textures
+        self.materials = MaterialPacker([s.bsdf for s in scene.shapes],
+                                        [e.texture for e in scene.emitters if e.texture is not None])
+        self.bsdf_index = self.materials.index
+        # texture coordinates only for shapes whose bsdf reads them; analytic uvs for spheres and disks
+        self.uv_shapes = {id(s) for s in scene.shapes if reads_uv(s.bsdf)}
+        self.uv_map_shapes = [s for s in scene.shapes if id(s) in self.uv_shapes
+                              and (s.kind == "sphere" or s.uv_map == "disk")]
+        self.uv_map_index = {id(s): i for i, s in enumerate(self.uv_map_shapes)}
         self.medium_index, self.media = _index_by_identity(
             [scene.camera.medium] + [m for s in scene.shapes for m in (s.interior, s.exterior)]
             + list(scene.media))
@@ -203,6 +226,7 @@ class Packer:
         self.bounds = (np.zeros(3), np.zeros(3))
         self.light_count, self.env_light, self.shape_light = 0, -1, {}
         self.stats = {"cylinders": len(self.cylinder_shapes)}
+        self._envmaps: dict = {}        # id(emitter) -> (image, scale, its tables), see _envmap_tables
 
     def medium_id(self, m) -> int:
         return -1 if m is None else self.medium_index[id(m)]
@@ -250,6 +274,8 @@ class Packer:
             sel = tri_n
             normals["n0"][:len(sel)], normals["n1"][:len(sel)], normals["n2"][:len(sel)] = \
                 sel[:, 0], sel[:, 1], sel[:, 2]
+        tris["uvs"] = -1
+        tri_uvs = self._triangle_uvs(tris)
 
         spheres = np.zeros(max(len(self.sphere_shapes), 1), layout.SPHERE)
         for i, s in enumerate(self.sphere_shapes):
@@ -281,7 +307,7 @@ class Packer:
         if len(codes):
             # shadow rays stop at the first opaque surface (kernels/bvh.h TRACE_SHADOW); a shape's
             # bsdf kind is structure, so the mask never needs repacking after an edit
-            shape_opaque = np.array([s.bsdf.kind != "null" for s in self.scene.shapes], bool)
+            shape_opaque = np.array([not transmits(s.bsdf) for s in self.scene.shapes], bool)
             analytic_shape = np.array([self.shape_index[id(s)] for s in self.sphere_shapes + self.cylinder_shapes],
                                       np.int64)
             opaque = np.concatenate([shape_opaque[tri_shape], shape_opaque[analytic_shape]])
@@ -294,7 +320,46 @@ class Packer:
         self.bvh_seconds = time.perf_counter() - t0
         self.triangle_count = ntri
         self.arrays.update(nodes=nodes, leaves=leaves, triangles=tris, normals=normals, spheres=spheres,
-                           cylinders=cylinders)
+                           cylinders=cylinders, tri_uvs=tri_uvs, uv_maps=self._uv_maps())
+
+    def _triangle_uvs(self, tris: np.ndarray) -> np.ndarray:
+        """Corner uvs of the triangles whose bsdf reads them (kernels/texcoords.h), and their index
+        in each Triangle record. A mesh without uvs gets Mitsuba's barycentric ones: (0, 0), (1, 0),
+        (0, 1) at the corners in the file's order (flip_normals reversed the corners)."""
+        rows = []
+        count = 0
+        for s in self.scene.shapes:
+            if s.kind != "mesh" or id(s) not in self.uv_shapes:
+                continue
+            m = len(s.faces)
+            if s.uvs is not None:
+                corner = np.asarray(s.uvs, np.float64)[s.faces]
+            else:
+                canonical = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+                corner = np.broadcast_to(canonical[::-1] if s.flip_normals else canonical, (m, 3, 2))
+            rows.append(corner.reshape(m, 6))
+            first = self.first_tri[id(s)]
+            tris["uvs"][first:first + m] = np.arange(count, count + m)
+            count += m
+        out = np.zeros(max(count, 1), layout.TRIANGLE_UV)
+        if rows:
+            out["uv"][:count] = np.concatenate(rows)
+        return out
+
+    def _uv_maps(self) -> np.ndarray:
+        """The unit sphere's or unit disk's frame of each analytic parametrization (texcoords.h)."""
+        out = np.zeros(max(len(self.uv_map_shapes), 1), layout.UV_MAP)
+        for i, s in enumerate(self.uv_map_shapes):
+            if s.kind == "sphere":
+                center, radius = s.local
+                frame = np.asarray(s.to_world, np.float64) @ tf.translate(center) @ tf.scale(radius)
+                out[i]["kind"] = layout.UV_MAP_KINDS["sphere"]
+            else:
+                frame = np.asarray(s.to_world, np.float64)
+                out[i]["kind"] = layout.UV_MAP_KINDS["disk"]
+            out[i]["to_world"] = frame[:3, :4].reshape(12)
+            out[i]["to_object"] = np.linalg.inv(frame)[:3, :4].reshape(12)
+        return out
 
     def _pack_lights(self):
         """Area lights first (one per emitting shape), then the scene's other emitters."""
@@ -328,7 +393,10 @@ class Packer:
                 light_tris.extend((self.first_tri[id(s)] + keep).tolist())
             self.shape_light[id(s)] = len(lights)
             lights.append(rec)
-        env_light = -1
+        env_light, env_data = -1, []     # env_data: the envmap's tables (one at most)
+        environments = [e for e in self.scene.emitters if e.kind in ("constant", "envmap")]
+        if len(environments) > 1 and any(e.kind == "envmap" for e in environments):
+            raise VolclError("only one environment emitter (envmap or constant) can be in a scene, as in Mitsuba")
         for e in self.scene.emitters:
             rec = np.zeros((), layout.LIGHT)
             rec["type"] = layout.LIGHT_TYPES[e.kind]
@@ -336,6 +404,9 @@ class Packer:
             rec["sphere"] = -1
             if e.kind == "point":
                 rec["position"] = e.position
+            elif e.kind == "spot":
+                _pack_spot(rec, e)
+                rec["texture"] = self.materials.tex(e.texture)
             elif e.kind == "directional":
                 rec["direction"] = np.asarray(e.direction) / np.linalg.norm(e.direction)
             elif e.kind == "constant":
@@ -343,13 +414,33 @@ class Packer:
                     lights[env_light]["value"] = lights[env_light]["value"] + np.asarray(e.value, np.float32)
                     continue
                 env_light = len(lights)
+            elif e.kind == "envmap":
+                data, res, norm = self._envmap_tables(e)
+                rec["to_local"] = np.linalg.inv(np.asarray(e.to_world, np.float64)[:3, :3]).reshape(9)
+                rec["env_res"], rec["env_data"], rec["env_norm"] = res, 0, norm   # the one environment
+                env_data.append(data)
+                env_light = len(lights)
             lights.append(rec)
         light_arr = np.zeros(max(len(lights), 1), layout.LIGHT)
         for i, rec in enumerate(lights):
             light_arr[i] = rec
         self.light_count, self.env_light = len(lights), env_light
         self.arrays.update(lights=light_arr, light_tri_cdf=np.asarray(light_cdf or [1.0], np.float32),
-                           light_tris=np.asarray(light_tris or [0], np.int32))
+                           light_tris=np.asarray(light_tris or [0], np.int32),
+                           env_data=env_data[0] if env_data else np.zeros(1, np.float32))
+        self.stats["env_texels"] = sum(int(np.prod(e.image.shape[:2])) for e in environments if e.kind == "envmap")
+
+    def _envmap_tables(self, e):
+        """(tables, (W, H), env_norm) of an envmap (volcl.envmap), kept while its image and scale
+        stay the same: repacking the lights for another light's edit does not rebuild them."""
+        cached = self._envmaps.get(id(e))
+        if cached is not None and cached[0] is e.image and cached[1] == e.scale:
+            return cached[2]
+        texels = envmap.texels_for(e.image, e.scale)
+        data, norm = envmap.tables(texels)
+        result = (data, (texels.shape[1], texels.shape[0]), norm)
+        self._envmaps[id(e)] = (e.image, e.scale, result)
+        return result
 
     def _pack_shapes(self):
         shape_arr = np.zeros(max(len(self.scene.shapes), 1), layout.SHAPE_INFO)
@@ -359,17 +450,22 @@ class Packer:
             r["light"] = self.shape_light.get(id(s), -1)
             r["interior"], r["exterior"] = self.medium_id(s.interior), self.medium_id(s.exterior)
             r["is_transition"] = int(s.interior is not None or s.exterior is not None)
+            r["uv_map"] = self.uv_map_index.get(id(s), -1)
         self.arrays["shapes"] = shape_arr
 
     def _pack_bsdfs(self):
-        self.arrays["bsdfs"] = _pack_bsdfs(self.bsdfs)
+        self.arrays.update(self.materials.arrays())
 
     def _pack_media(self):
         grids = GridPacker(self.majorant_cells)
-        media = _pack_media(self.media, grids)
+        phases = PhasePacker()
+        media = _pack_media(self.media, grids, phases)
         grid_desc, grid_data = grids.arrays()
-        self.stats.update(grid_voxels=grids.voxels, majorant_cells=grids.majorant_count)
-        self.arrays.update(media=media, grids=grid_desc, grid_data=grid_data)
+        phase_lobes, phase_tables = phases.arrays()
+        self.stats.update(grid_voxels=grids.voxels, majorant_cells=grids.majorant_count, sparse_grids=grids.sparse,
+                          phase_table_ratio_error=max(phases.ratio_errors, default=0.0))
+        self.arrays.update(media=media, grids=grid_desc, grid_data=grid_data, phase_lobes=phase_lobes,
+                           phase_tables=phase_tables)
 
     def _pack_camera(self):
         self.arrays["filter_table"] = filter_table(self.scene.camera.rfilter)

@@ -27,9 +27,10 @@ import numpy as np
 
 from . import features as feat
 from .errors import VolclError
+from .pack_materials import chain, texture_tree, textures_of
 from .scene import checks
 from .scene.checks import CheckError
-from .scene.model import Bsdf, Camera, Emitter, Medium, Phase, Scene as ModelScene, Shape, Volume, rgb
+from .scene.model import Bsdf, Camera, Emitter, Medium, Phase, Scene as ModelScene, Shape, Texture, Volume, rgb
 from .scene.objects import IOR_NAMES
 from .scene.shapes import place
 
@@ -53,6 +54,8 @@ KINDS = {
     "transform": "a <transform> (a 4x4 matrix)",
     "ior": "a <float> or a <string> material name",
     "grid": "a grid of values (a numpy array of the grid's shape)",
+    "image": "an image's texels (a numpy array of the image's shape: height, width, channels)",
+    "uv_transform": "a 3x3 affine map of texture coordinates (last row 0 0 1)",
 }
 
 
@@ -133,6 +136,34 @@ def convert(param: Param, value):
         if np.abs(m[3] - [0, 0, 0, 1]).max() > 0:
             raise CheckError(f"matrix: the last row must be 0 0 0 1 (affine), got {m[3].tolist()}")
         return checks.invertible(param.name, m)
+    if kind == "image":
+        # texture texels and environment maps alike: a shape kept, finite and non-negative texels
+        if not isinstance(value, np.ndarray) or value.dtype.kind not in "iuf":
+            raise _type_error(param, value)
+        what = "texture" if "bsdfs" in param.parts else "image"
+        if value.shape != param.shape:
+            raise CheckError(f"'{param.name}' must keep the {what}'s shape {param.shape} (height, width, "
+                             f"channels), got {value.shape}; load another image file to change it")
+        a = np.array(value, dtype=np.float32)
+        bad = ~np.isfinite(a) | (a < 0)
+        if bad.any():
+            y, x, c = (int(i) for i in np.argwhere(bad)[0])
+            v = float(a[y, x, c])
+            raise CheckError(f"'{param.name}' has a {'negative' if v < 0 else 'non-finite'} texel {v!r} at x={x} "
+                             f"y={y} channel={c}; {what}s need finite, non-negative values")
+        return a
+    if kind == "uv_transform":
+        try:
+            m = np.asarray(value, dtype=np.float64)
+        except Exception:
+            raise _type_error(param, value) from None
+        if m.shape != (3, 3):
+            raise _type_error(param, value)
+        for x in m.reshape(-1):
+            checks.finite("to_uv", float(x), str(x))
+        if np.abs(m[2] - [0, 0, 1]).max() > 0:
+            raise CheckError(f"to_uv: the last row must be 0 0 1 (affine), got {m[2].tolist()}")
+        return m
     if kind == "grid":
         if not isinstance(value, np.ndarray) or value.dtype.kind not in "iuf":
             raise _type_error(param, value)
@@ -158,13 +189,29 @@ def _owner(label: str, obj, what: str) -> tuple:
     return f"<{source.element}>", f"{text} at {source.file}:{source.line}"
 
 
-def _bsdf_params(scene: ModelScene, bsdf: Bsdf, prefix: str):
+# bsdf kind -> its colour parameters that may be textures: (name in files, model attribute)
+_BSDF_COLOURS = {
+    "diffuse": (("reflectance", "reflectance"),),
+    "conductor": (("specular_reflectance", "specular_reflectance"), ("eta", "eta"), ("k", "k")),
+    "dielectric": (("specular_reflectance", "specular_reflectance"),
+                   ("specular_transmittance", "specular_transmittance")),
+    "plastic": (("diffuse_reflectance", "reflectance"), ("specular_reflectance", "specular_reflectance")),
+}
+_BSDF_COLOURS.update(roughconductor=_BSDF_COLOURS["conductor"], roughdielectric=_BSDF_COLOURS["dielectric"],
+                     thindielectric=_BSDF_COLOURS["dielectric"], roughplastic=_BSDF_COLOURS["plastic"])
+_WITH_IORS = ("dielectric", "roughdielectric", "thindielectric", "plastic", "roughplastic")
+_DISTINCT_IORS = ("roughdielectric", "roughplastic")   # Mitsuba refuses int_ior == ext_ior for these
+
+
+def _bsdf_params(scene: ModelScene, bsdf: Bsdf, prefix: str, named=None):
     """A two-sided bsdf is a copy of the one it wraps (parse_mitsuba): an edit reaches both, as an
-    edit of the file would."""
+    edit of the file would. Textures give their own parameters under the parameter's name (or
+    their id); a wrapped bsdf (mask, bump and normal maps) under `nested_bsdf` (or its id)."""
     root = bsdf.twosided_of or bsdf
     group = [root] + [s.bsdf for s in scene.shapes if s.bsdf.twosided_of is root and s.bsdf is not root]
     group = list({id(b): b for b in group}.values())
     owner = _owner(f"<bsdf type=\"{bsdf.kind}\">", bsdf, "bsdf")
+    named = {} if named is None else named
 
     def field_param(key, name, attr, kind, rule=None):
         def get():
@@ -177,21 +224,89 @@ def _bsdf_params(scene: ModelScene, bsdf: Bsdf, prefix: str):
             if name == "reflectance" and (value > 1).any():
                 warnings.warn(f"{prefix}.{key}: '{name}' {value.tolist()} exceeds 1: the surface reflects "
                               f"more light than it receives", stacklevel=4)
+            if attr in ("int_ior", "ext_ior") and bsdf.kind in _DISTINCT_IORS:
+                other = bsdf.ext_ior if attr == "int_ior" else bsdf.int_ior
+                if value == other:
+                    raise CheckError(f"the interior and exterior indices of refraction must differ (both "
+                                     f"{value:g}), as Mitsuba requires for {bsdf.kind}")
             for b in group:
                 setattr(b, attr, value.copy() if isinstance(value, np.ndarray) else value)
         return Param(f"{prefix}.{key}", name, kind, get, put, ("bsdfs",), owner)
 
-    if bsdf.kind == "diffuse":
-        yield field_param("reflectance.value", "reflectance", "reflectance", "color", checks.nonneg_color)
-    elif bsdf.kind == "dielectric":
+    def textured(name, attr, kind, rule):
+        value = getattr(bsdf, attr)
+        if isinstance(value, Texture):
+            yield from _texture_params(value, named.get(id(value)) or f"{prefix}.{name}", named)
+        elif value is not None:
+            yield field_param(f"{name}.value", name, attr, kind, rule)
+
+    for name, attr in _BSDF_COLOURS.get(bsdf.kind, ()):
+        value = getattr(bsdf, attr)
+        if (name.startswith("specular_") and bsdf.kind not in ("conductor", "roughconductor")
+                and not isinstance(value, Texture) and np.all(np.asarray(value) == 1.0)):
+            continue        # Mitsuba lists these factors only where a file gives them
+        yield from textured(name, attr, "color", checks.nonneg_color)
+    if bsdf.kind in _WITH_IORS:
         yield field_param("int_ior", "int_ior", "int_ior", "ior", checks.positive)
         yield field_param("ext_ior", "ext_ior", "ext_ior", "ior", checks.positive)
-    elif bsdf.kind == "conductor":
-        yield field_param("specular_reflectance.value", "specular_reflectance", "specular_reflectance", "color",
-                          checks.nonneg_color)
-        if bsdf.eta is not None:
-            yield field_param("eta.value", "eta", "eta", "color", checks.nonneg_color)
-            yield field_param("k.value", "k", "k", "color", checks.nonneg_color)
+    if bsdf.kind in ("roughconductor", "roughdielectric", "roughplastic"):
+        names = (("alpha_u", "alpha_u"), ("alpha_v", "alpha_v")) if bsdf.anisotropic else (("alpha", "alpha_u"),)
+        for name, attr in names:
+            if bsdf.kind == "roughplastic":
+                yield _alpha_param(bsdf, group, prefix, owner)
+            else:
+                yield from textured(name, attr, "float", None) if isinstance(getattr(bsdf, attr), Texture) \
+                    else [_alpha_param(bsdf, group, prefix, owner, name, attr, f"{name}.value")]
+    if bsdf.kind == "mask":
+        if isinstance(bsdf.opacity, Texture):
+            yield from _texture_params(bsdf.opacity, named.get(id(bsdf.opacity)) or f"{prefix}.opacity", named)
+        else:
+            yield field_param("opacity.value", "opacity", "opacity", "float")
+    if bsdf.kind == "bumpmap":
+        yield field_param("scale", "scale", "scale", "float")
+    if bsdf.kind in ("bumpmap", "normalmap"):
+        sub = "nested_texture" if bsdf.kind == "bumpmap" else "normalmap"
+        yield from _texture_params(bsdf.map_texture, named.get(id(bsdf.map_texture)) or f"{prefix}.{sub}", named)
+
+
+def _alpha_param(bsdf: Bsdf, group, prefix, owner, name="alpha", attr="alpha_u", key="alpha"):
+    """Isotropic roughness sets alpha_u and alpha_v together."""
+    def put(value):
+        for b in group:
+            if bsdf.anisotropic:
+                setattr(b, attr, value)
+            else:
+                b.alpha_u = b.alpha_v = value
+    return Param(f"{prefix}.{key}", name, "float", lambda: float(getattr(bsdf, attr)), put, ("bsdfs",), owner)
+
+
+def _texture_params(tex: Texture, prefix: str, named: dict):
+    """A bitmap's texels and uv map, a checkerboard's colours (or their textures) and uv map."""
+    named.setdefault(id(tex), prefix)
+    owner = _owner(f"<texture type=\"{tex.kind}\">", tex, "texture")
+
+    def param(key, name, kind, get, put, shape=None):
+        return Param(f"{prefix}.{key}", name, kind, get, put, ("bsdfs",), owner, shape)
+
+    if tex.kind == "bitmap":
+        def put_data(a):
+            tex.data = a
+        yield param("data", "data", "image", lambda: tex.data.copy(), put_data, tex.data.shape)
+    else:
+        for k in ("color0", "color1"):
+            value = getattr(tex, k)
+            if isinstance(value, Texture):
+                yield from _texture_params(value, named.get(id(value)) or f"{prefix}.{k}", named)
+                continue
+
+            def put_colour(a, k=k):
+                checks.nonneg_color(k, a)
+                setattr(tex, k, a)
+            yield param(f"{k}.value", k, "color", lambda k=k: np.array(getattr(tex, k), np.float64), put_colour)
+
+    def put_uv(m):
+        tex.to_uv = m
+    yield param("to_uv", "to_uv", "uv_transform", lambda: np.array(tex.to_uv, np.float64), put_uv)
 
 
 def _medium_params(scene: ModelScene, m: Medium, prefix: str):
@@ -244,7 +359,10 @@ def _medium_params(scene: ModelScene, m: Medium, prefix: str):
             m.phase = Phase()
         else:
             m.phase = Phase("hg", g)
-    yield param("phase_function.g", "g", "float", lambda: float(m.phase.g if m.phase.kind == "hg" else 0.0), put_g)
+    # only isotropic and HG media have this g: setting it would replace any other phase function with HG
+    if m.phase.kind in ("isotropic", "hg"):
+        yield param("phase_function.g", "g", "float", lambda: float(m.phase.g if m.phase.kind == "hg" else 0.0),
+                    put_g)
 
     def put_radiance(a):
         checks.nonneg_color("volcl_radiance", a)
@@ -255,14 +373,19 @@ def _medium_params(scene: ModelScene, m: Medium, prefix: str):
 
 def _emitter_params(scene: ModelScene, e: Emitter, prefix: str):
     owner = _owner(f"<emitter type=\"{e.kind}\">", e, "emitter")
-    name = {"point": "intensity", "directional": "irradiance", "constant": "radiance"}[e.kind]
+    if e.kind == "envmap":
+        yield from _envmap_params(e, prefix, owner)
+        return
+    name = {"point": "intensity", "spot": "intensity", "directional": "irradiance", "constant": "radiance"}[e.kind]
 
     def put_value(a):
         checks.nonneg_color(name, a)
         e.value = a
     yield Param(f"{prefix}.{name}.value", name, "color", lambda: np.array(e.value, np.float64), put_value,
                 ("lights",), owner)
-    if e.kind == "point":
+    if e.kind == "spot":
+        yield from _spot_params(e, prefix, owner)
+    elif e.kind == "point":
         def put_position(p):
             e.position = p
         yield Param(f"{prefix}.position", "position", "point", lambda: np.array(e.position, np.float64),
@@ -272,6 +395,52 @@ def _emitter_params(scene: ModelScene, e: Emitter, prefix: str):
             e.direction = checks.direction(d)
         yield Param(f"{prefix}.direction", "direction", "point", lambda: np.array(e.direction, np.float64),
                     put_direction, ("lights",), owner)
+
+
+def _spot_params(e: Emitter, prefix: str, owner):
+    def put_cutoff(v):
+        e.cutoff_angle = checks.spot_cutoff(v)
+
+    def put_beam(v):
+        e.beam_width = checks.spot_beam(v)
+
+    def put_to_world(m):
+        e.to_world = m
+        e.position = m[:3, 3].copy()
+    yield Param(f"{prefix}.cutoff_angle", "cutoff_angle", "float", lambda: float(e.cutoff_angle), put_cutoff,
+                ("lights",), owner)
+    yield Param(f"{prefix}.beam_width", "beam_width", "float", lambda: float(e.beam_width), put_beam,
+                ("lights",), owner)
+    yield Param(f"{prefix}.to_world", "to_world", "transform", lambda: e.to_world.copy(), put_to_world,
+                ("lights",), owner)
+
+
+def _envmap_params(e: Emitter, prefix: str, owner):
+    """Mitsuba's keys: scale, data (here the image as read, (height, width, channels); Mitsuba's
+    tensor has two more columns, copies of the seam), to_world."""
+    def put_scale(v):
+        if not v >= 0:
+            raise CheckError(f"'scale' must be >= 0, got {v}")
+        if float(np.max(e.image)) * v > checks.FLOAT32_MAX:
+            raise CheckError(f"the brightest texel times 'scale' {v:g} is beyond the single-precision range")
+        e.scale = v
+
+    def put_data(a):
+        bad = a < 0
+        if bad.any():
+            y, x, c = (int(i) for i in np.argwhere(bad)[0])
+            raise CheckError(f"'data' has a negative texel {float(a[y, x, c])!r} at x={x} y={y} channel={c}")
+        if float(np.max(a)) * e.scale > checks.FLOAT32_MAX:
+            raise CheckError("'data' times 'scale' reaches beyond the single-precision range")
+        e.image = a
+
+    def put_to_world(m):
+        e.to_world = checks.envmap_transform(m)
+    yield Param(f"{prefix}.scale", "scale", "float", lambda: float(e.scale), put_scale, ("lights",), owner)
+    yield Param(f"{prefix}.data", "data", "image", lambda: e.image.copy(), put_data, ("lights",), owner,
+                e.image.shape)
+    yield Param(f"{prefix}.to_world", "to_world", "transform", lambda: e.to_world.copy(), put_to_world,
+                ("lights",), owner)
 
 
 def _shape_params(scene: ModelScene, s: Shape, prefix: str):
@@ -321,6 +490,9 @@ def collect(scene: ModelScene) -> dict:
     taken.update(s.emitter_id for s in scene.shapes if s.emitter_id)
     named: dict[int, str] = {}
     out: dict[str, Param] = {}
+    # textures with an id are named by it; others by the parameter that holds them
+    textures = {id(t): t.id for t in _all_textures(scene) if t.id}
+    taken.update(textures.values())
 
     def name(obj, fallback: str) -> str | None:
         """The key prefix of obj (None: already listed under another name)."""
@@ -349,9 +521,12 @@ def collect(scene: ModelScene) -> dict:
     for i, s in enumerate(scene.shapes):
         key = name(s, f"shape_{i}")
         add(PARAMETERS[Shape](scene, s, key))
-        prefix = name(s.bsdf, f"{key}.bsdf")
-        if prefix:
-            add(PARAMETERS[Bsdf](scene, s.bsdf, prefix))
+        holder = f"{key}.bsdf"
+        for b in chain(s.bsdf):
+            prefix = name(b, holder)
+            if prefix:
+                add(PARAMETERS[Bsdf](scene, b, prefix, textures))
+            holder = f"{named[id(b)]}.nested_bsdf"
         if s.emitter_radiance is not None:
             prefix = s.emitter_id if s.emitter_id and s.emitter_id not in named.values() else f"{key}.emitter"
             named[id(s.emitter_radiance)] = prefix
@@ -371,10 +546,17 @@ def collect(scene: ModelScene) -> dict:
     return out
 
 
+def _all_textures(scene: ModelScene):
+    for s in scene.shapes:
+        for b in chain(s.bsdf):
+            for t in textures_of(b):
+                yield from texture_tree(t)
+
+
 def _objects(scene: ModelScene):
     yield scene.camera
     yield from scene.shapes
-    yield from (s.bsdf for s in scene.shapes)
+    yield from (b for s in scene.shapes for b in chain(s.bsdf))
     yield from scene.emitters
     yield from scene.media
 
@@ -413,7 +595,7 @@ class SceneParameters(Mapping):
         return key in self._params
 
     def kind(self, key) -> str:
-        """'float', 'color', 'point', 'transform', 'ior' or 'grid'."""
+        """'float', 'color', 'point', 'transform', 'ior', 'grid' or 'image'."""
         return self._param(key).kind
 
     def _param(self, key) -> Param:

@@ -11,8 +11,10 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import shlex
 import threading
 import time
+import warnings
 from functools import lru_cache
 from pathlib import Path
 
@@ -42,9 +44,16 @@ def sources_hash() -> str:
     return h.hexdigest()[:16]
 
 
+def env_build_options() -> list[str]:
+    """Options from VOLCL_BUILD_OPTIONS, appended to every kernel build (shell-style quoting), so
+    tools such as Oclgrind (which needs -cl-opt-disable) or a driver's own flags can be used
+    without editing code."""
+    return shlex.split(os.environ.get("VOLCL_BUILD_OPTIONS", ""))
+
+
 def build_options(features: dict[str, bool], extra: tuple[str, ...] = ()) -> list[str]:
     return ([f"-I{kernels_dir()}", "-cl-std=CL1.2", f"-DVOLCL_SOURCE_HASH=0x{sources_hash()}"]
-            + feat.defines(features) + list(extra))
+            + feat.defines(features) + list(extra) + env_build_options())
 
 
 def _source_path(source_file) -> Path:
@@ -56,11 +65,17 @@ def build_program(ctx, features: dict[str, bool], source_file=ENTRY_FILE, extra:
     """Build the program for `ctx` now (pyopencl's and the driver's disk caches may make it quick);
     nothing is kept in memory. Renders get their programs from a ProgramCache instead."""
     src = _source_path(source_file).read_text()
-    return cl.Program(ctx, src).build(options=build_options(features, extra))
+    with warnings.catch_warnings():
+        # Intel's compiler always logs (remarks, "Kernel was not vectorized"); pyopencl turns any
+        # log into a CompilerWarning. Kernel warnings are caught by tests/test_kernel_warnings.py.
+        warnings.simplefilter("ignore", cl.CompilerWarning)
+        return cl.Program(ctx, src).build(options=build_options(features, extra))
 
 
 def program_key(features: dict[str, bool], source_file=ENTRY_FILE, extra: tuple[str, ...] = ()) -> tuple:
-    return str(source_file), tuple(sorted((k, bool(v)) for k, v in features.items())), tuple(extra)
+    # the environment's options are part of the key: changing VOLCL_BUILD_OPTIONS rebuilds
+    return (str(source_file), tuple(sorted((k, bool(v)) for k, v in features.items())), tuple(extra),
+            tuple(env_build_options()))
 
 
 class ProgramCache:

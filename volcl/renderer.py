@@ -27,6 +27,7 @@ from . import device as devmod
 from .errors import VolclError
 from .estimator import Estimator
 from .features import describe
+from .grids import grid_cost_notes
 from .opencl import cl
 from .pack import ARG_ORDER
 from .prepared import Scene as PreparedScene
@@ -45,6 +46,11 @@ _DEFAULT = object()
 # Samples per pixel before a target error is trusted: with fewer, a pixel whose rare bright paths
 # have not turned up yet reports a small variance along with its small mean (README, "Accuracy").
 MIN_SPP_FOR_ERROR = 16
+# Work-group size of every launch (where the device and kernel allow it), the global size rounded up
+# to a multiple of it (the kernel ignores the items past the end): drivers that compile a kernel
+# per work-group size (PoCL does, and picks a size from the global size when given none) then
+# compile once, however many sizes of tiles and launches a render has.
+GROUP_ITEMS = 64
 # bytes of accumulators per pixel and slot: sums and sums of squares (float4 each), invalid and
 # cut-off counts (uint each)
 ACCUMULATOR_BYTES = 40
@@ -76,14 +82,7 @@ class Renderer:
         self.version = scene.version
         self.device = devmod.resolve(device)
         self.estimator = estimator or Estimator()
-        packed = scene.packed
-        self.features, estimator_params = self.estimator.resolve(self.scene, features, detected=packed.features)
-        self.params = packed.params.copy()
-        for name, value in estimator_params.items():
-            self.params[name] = value
-        self.params["majorant_scale"] = majorant_scale
-        if seed is not None:
-            self.params["seed"] = seed & 0xFFFFFFFF
+        self.features, self.params = render_setup(scene, self.estimator, features, seed, majorant_scale)
         self.seed = int(self.params["seed"])
         self.width, self.height = self.scene.camera.width, self.scene.camera.height
         self.tile = Tile.of(tile, self.width, self.height)
@@ -91,12 +90,14 @@ class Renderer:
         self.slots = int(slots) if slots else accumulator_slots(self.width, self.height)
         # a scene too large for the device is the user's to fix: say so before uploading anything
         devmod.check_fits(self.device, scene.buffer_sizes(),
-                          accumulator_bytes=ACCUMULATOR_BYTES * max(self.slots * self.npix, MIN_ITEMS))
+                          accumulator_bytes=ACCUMULATOR_BYTES * max(self.slots * self.npix, MIN_ITEMS),
+                          notes=grid_cost_notes(scene.packed.stats.get("sparse_grids", ())))
         self.uploaded = scene.upload(self.device)
         self._get_program()
         ctx = self.device.ctx
         self.queue = self.device.queue
         self.kernel = cl.Kernel(self.program, "render_pass")
+        self.group_items = _group_items(self.kernel, self.device.device)
         mf = cl.mem_flags
         self.params_buffer = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=self.params.reshape(1))
         if launch_seconds is _DEFAULT:
@@ -136,22 +137,17 @@ class Renderer:
         return self.prepared.packed
 
     def reset(self):
+        # zeros written from the host rather than clEnqueueFillBuffer: Oclgrind 21.10 takes a
+        # filled buffer for uninitialized memory and reports every accumulator update
         for buf in (self.sums, self.sums_sq, self.invalid, self.cutoffs):
-            cl.enqueue_fill_buffer(self.queue, buf, np.zeros(1, np.float32), 0, buf.size)
+            cl.enqueue_copy(self.queue, buf, np.zeros(buf.size // 4, np.uint32))
         self.samples_done = 0
         self.seconds = 0.0
 
     def data_hash(self) -> str:
         """sha256 of everything the kernel reads except the seed: two renderers with equal hashes
         (and equal seeds, features and kernel sources) compute the same samples."""
-        h = hashlib.sha256()
-        for name in ARG_ORDER:
-            a = np.array(self.params.reshape(1) if name == "params" else self.packed.arrays[name])
-            if name == "params":
-                a["seed"] = 0
-            h.update(name.encode())
-            h.update(np.ascontiguousarray(a).tobytes())
-        return h.hexdigest()
+        return data_hash(self.params, self.packed)
 
     def _launch(self, sample_base: int, slots: int, accum):
         """Samples sample_base .. sample_base + slots - 1 of every pixel of the tile, into slots
@@ -165,7 +161,8 @@ class Renderer:
                                  np.int32(t.width), np.int32(self.npix), np.int32(first), np.int32(count),
                                  np.int32(slots))
             t0 = time.perf_counter()
-            event = cl.enqueue_nd_range_kernel(self.queue, self.kernel, (count * slots,), None)
+            items = -(-count * slots // self.group_items) * self.group_items
+            event = cl.enqueue_nd_range_kernel(self.queue, self.kernel, (items,), (self.group_items,))
             self.launches += 1
             if self.adaptive:
                 event.wait()
@@ -212,37 +209,23 @@ class Renderer:
           stop()        a callback returning true (checked between passes: signals, checkpoints).
         With none of spp, time_limit and target_error, the scene's own spp. RenderResult.stop_reason
         names the rule that ended it; progress(n) is called after each pass with the samples added."""
-        if self.prepared.version != self.version:
-            raise VolclError("the scene was updated after this render began, so its samples would mix two "
-                             "scenes; start a new render (volcl.render does) to see the update")
-        if spp is None and time_limit is None and target_error is None:
-            spp = self.scene.spp
-        target = None if spp is None else self.samples_done + spp
-        self.spp_requested = target or 0
-        check = None if target_error is None else _ErrorCheck(target_error, max(min_spp, 1))
+        target = render_target(self, spp, time_limit, target_error)
+        rules = StopRules(time_limit, target_error, min_spp, stop)
         reason = "spp"
-        t_start = time.perf_counter()
         while target is None or self.samples_done < target:
             t0 = time.perf_counter()
             count = self.slots - self.samples_done % self.slots
             if target is not None:
                 count = min(count, target - self.samples_done)
-            if check is not None:
-                count = max(1, min(count, check.next_at - self.samples_done))
+            count = rules.cap(self.samples_done, count)
             self._pass(self.samples_done, count)
             self.queue.finish()
             self.samples_done += count
             self.seconds += time.perf_counter() - t0
             if progress is not None:
                 progress(count)
-            if time_limit is not None and time.perf_counter() - t_start >= time_limit:
-                reason = "time"
-                break
-            if check is not None and self.samples_done >= check.next_at and check.reached(self):
-                reason = "error"
-                break
-            if stop is not None and stop():
-                reason = "stopped"
+            reason = rules.reason(self) or reason
+            if reason != "spp":
                 break
         result = self.result()
         result.stop_reason = reason
@@ -292,30 +275,133 @@ class Renderer:
         self.samples_done = int(state["samples_done"])
         self.seconds = float(state["seconds"])
 
+    def advance(self, spp: int):
+        """Add `spp` samples per pixel in passes, with no stopping rules and no read-back (the
+        tiles of a render on several devices advance so, volcl.rounds)."""
+        end = self.samples_done + spp
+        while self.samples_done < end:
+            t0 = time.perf_counter()
+            count = min(self.slots - self.samples_done % self.slots, end - self.samples_done)
+            self._pass(self.samples_done, count)
+            self.queue.finish()
+            self.samples_done += count
+            self.seconds += time.perf_counter() - t0
+
+    @property
+    def device_label(self) -> str:
+        return self.device.label
+
     def result(self) -> RenderResult:
-        st = self.state()
-        s = st["sums"].astype(np.float64).reshape(self.slots, self.npix, 4).sum(0)
-        ss = st["sums_sq"].astype(np.float64).reshape(self.slots, self.npix, 4).sum(0)
-        count = s[:, 3:4]
-        safe = np.maximum(count, 1)
-        mean = s[:, :3] / safe
-        sample_var = np.maximum(ss[:, :3] / safe - mean ** 2, 0) * safe / np.maximum(safe - 1, 1)
-        var_mean = sample_var / safe
-        shape = (self.tile.height, self.tile.width, 3)
-        second_moment = (ss[:, :3] / safe).reshape(shape).astype(np.float32)
-        packed = self.packed
-        whole = self.tile.pixels == self.width * self.height
-        info = dict(self.prepared.info, estimator=self.estimator.describe(), kernel_sha256=sources_hash(),
-                    version=__version__, spp_requested=self.spp_requested)
-        return RenderResult(
-            image=mean.reshape(shape).astype(np.float32), variance=var_mean.reshape(shape).astype(np.float32),
-            spp=self.samples_done, invalid=int(st["invalid"].sum()), seconds=self.seconds,
-            device=self.device.label, features=self.features,
-            build_seconds=self.build_seconds, tracking_cutoffs=int(st["cutoffs"].sum(dtype=np.uint64)),
-            stats={"triangles": packed.triangle_count, "spheres": packed.sphere_count,
-                   "bvh_seconds": packed.bvh_seconds, "features": describe(self.features), **packed.stats},
-            seed=self.seed, tile=None if whole else self.tile, image_size=(self.width, self.height), info=info,
-            second_moment=second_moment)
+        return build_result(self, self.state(), self.tile)
+
+
+def _group_items(kernel, device) -> int:
+    """GROUP_ITEMS, or the largest power of two below it that the kernel runs with on `device`."""
+    limit = min(int(device.max_work_group_size),
+                int(kernel.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, device)))
+    n = GROUP_ITEMS
+    while n > limit:
+        n //= 2
+    return max(n, 1)
+
+
+def render_setup(prepared: PreparedScene, estimator: Estimator, features: dict | None = None,
+                 seed: int | None = None, majorant_scale: float = 1.0) -> tuple[dict, np.ndarray]:
+    """(feature flags to compile, RenderParams record) of a render of `prepared` with this
+    estimator and seed (the scene's seed when None); every tile and device of a render shares them."""
+    packed = prepared.packed
+    feats, estimator_params = estimator.resolve(prepared.model, features, detected=packed.features)
+    params = packed.params.copy()
+    for name, value in estimator_params.items():
+        params[name] = value
+    params["majorant_scale"] = majorant_scale
+    if seed is not None:
+        params["seed"] = seed & 0xFFFFFFFF
+    return feats, params
+
+
+def data_hash(params: np.ndarray, packed) -> str:
+    """sha256 of everything the kernel reads except the seed (Renderer.data_hash)."""
+    h = hashlib.sha256()
+    for name in ARG_ORDER:
+        a = np.array(params.reshape(1) if name == "params" else packed.arrays[name])
+        if name == "params":
+            a["seed"] = 0
+        h.update(name.encode())
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()
+
+
+def build_result(render, state: dict, tile: Tile) -> RenderResult:
+    """The RenderResult of an accumulator state (Renderer.state) of `tile`, described by `render`
+    (a Renderer, or a volcl.rounds.TiledRender for a whole image made on several devices)."""
+    slots, npix = int(state["slots"]), tile.pixels
+    s = state["sums"].astype(np.float64).reshape(slots, npix, 4).sum(0)
+    ss = state["sums_sq"].astype(np.float64).reshape(slots, npix, 4).sum(0)
+    count = s[:, 3:4]
+    safe = np.maximum(count, 1)
+    mean = s[:, :3] / safe
+    sample_var = np.maximum(ss[:, :3] / safe - mean ** 2, 0) * safe / np.maximum(safe - 1, 1)
+    var_mean = sample_var / safe
+    shape = (tile.height, tile.width, 3)
+    second_moment = (ss[:, :3] / safe).reshape(shape).astype(np.float32)
+    packed = render.packed
+    whole = tile.pixels == render.width * render.height
+    info = dict(render.prepared.info, estimator=render.estimator.describe(), kernel_sha256=sources_hash(),
+                version=__version__, spp_requested=render.spp_requested)
+    return RenderResult(
+        image=mean.reshape(shape).astype(np.float32), variance=var_mean.reshape(shape).astype(np.float32),
+        spp=render.samples_done, invalid=int(state["invalid"].sum()), seconds=render.seconds,
+        device=render.device_label, features=render.features,
+        build_seconds=render.build_seconds, tracking_cutoffs=int(state["cutoffs"].sum(dtype=np.uint64)),
+        stats={"triangles": packed.triangle_count, "spheres": packed.sphere_count,
+               "bvh_seconds": packed.bvh_seconds, "features": describe(render.features), **packed.stats},
+        seed=render.seed, tile=None if whole else tile, image_size=(render.width, render.height), info=info,
+        second_moment=second_moment)
+
+
+def render_target(render, spp, time_limit, target_error) -> int | None:
+    """The spp at which a progressive render's call ends (None: another rule ends it), recorded as
+    its spp_requested; the scene's own spp when no rule is given. `render` is a Renderer or a
+    TiledRender; one whose scene was updated since it began is refused."""
+    if render.prepared.version != render.version:
+        raise VolclError("the scene was updated after this render began, so its samples would mix two "
+                         "scenes; start a new render (volcl.render does) to see the update")
+    if spp is None and time_limit is None and target_error is None:
+        spp = render.scene.spp
+    target = None if spp is None else render.samples_done + spp
+    render.spp_requested = target or 0
+    return target
+
+
+class StopRules:
+    """The rules that end a progressive render besides its spp, checked between passes (on one
+    device) or rounds (volcl.rounds), in this order: time_limit seconds since the render began,
+    the image's estimated relative error at or below target_error (checked from min_spp samples
+    on, at spp counts _ErrorCheck picks), and stop() returning true."""
+
+    def __init__(self, time_limit=None, target_error=None, min_spp: int = MIN_SPP_FOR_ERROR, stop=None):
+        self.time_limit = time_limit
+        self.check = None if target_error is None else _ErrorCheck(target_error, max(min_spp, 1))
+        self.stop = stop
+        self.t_start = time.perf_counter()
+
+    def cap(self, done: int, count: int) -> int:
+        """`count` samples, or fewer so as to end at the next error check."""
+        return count if self.check is None else max(1, min(count, self.check.next_at - done))
+
+    def seconds_left(self) -> float | None:
+        return None if self.time_limit is None else self.time_limit - (time.perf_counter() - self.t_start)
+
+    def reason(self, render) -> str | None:
+        """'time', 'error' or 'stopped' when a rule is met by `render` (a Renderer or TiledRender)."""
+        if self.time_limit is not None and self.seconds_left() <= 0:
+            return "time"
+        if self.check is not None and render.samples_done >= self.check.next_at and self.check.reached(render):
+            return "error"
+        if self.stop is not None and self.stop():
+            return "stopped"
+        return None
 
 
 class _ErrorCheck:

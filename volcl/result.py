@@ -29,11 +29,15 @@ class RenderResult:
     # medium segments whose delta / ratio tracking hit its step bound and was cut short (each a
     # biased estimate; never happens in ordinary scenes, see kernels/media.h)
     tracking_cutoffs: int = 0
-    stop_reason: str = "spp"    # the rule that ended the render: 'spp', 'time', 'error' or 'stopped'
+    # the rule that ended the render: 'spp', 'time', 'error', 'stopped' (a stop() request) or
+    # 'failed' (every device failed; the image holds the samples every pixel got before)
+    stop_reason: str = "spp"
     seed: int = 0
     tile: Tile | None = None    # None: the whole image
     image_size: tuple = (0, 0)  # (width, height) of the whole image
     info: dict = field(default_factory=dict)   # metadata: scene file, -D values, estimator, kernels
+    # device (or worker) label -> fraction of the samples it rendered in this session; {} for one device
+    shares: dict = field(default_factory=dict)
     # the mean of each pixel's squared samples (the layer Mitsuba's moment integrator asks for)
     second_moment: np.ndarray | None = None
 
@@ -50,7 +54,8 @@ class RenderResult:
     @property
     def complete(self) -> bool:
         """Whether the render reached what it was asked for (False after a stop() request)."""
-        return self.stop_reason != "stopped" and self.spp >= int(self.info.get("spp_requested", 0) or 0)
+        return (self.stop_reason not in ("stopped", "failed")
+                and self.spp >= int(self.info.get("spp_requested", 0) or 0))
 
     @property
     def metadata(self) -> dict:
@@ -62,8 +67,13 @@ class RenderResult:
                    render_seconds=round(self.seconds, 3), version=self.info.get("version", ""),
                    invalid_samples=self.invalid, tracking_cutoffs=self.tracking_cutoffs,
                    rel_error=float(self.rel_error), stop_reason=self.stop_reason,
-                   estimator=self.info.get("estimator", ""))
+                   estimator=self.info.get("estimator", ""), device_shares=self.shares_text())
         return out
+
+    def shares_text(self) -> str:
+        """'0:0 NAME 0.512, 0:1 NAME 0.488': each device's share of the samples (one device: 1)."""
+        shares = self.shares or {self.device: 1.0}
+        return ", ".join(f"{label} {share:.3f}" for label, share in shares.items())
 
     def to_srgb(self, exposure: float = 0.0) -> np.ndarray:
         """The image for display: scaled by 2^exposure, clamped to [0, 1] and sRGB-encoded, as
@@ -111,9 +121,12 @@ def merge(results: list, width: int | None = None, height: int | None = None) ->
             moments[t.rows, t.columns] = r.second_moment
     devices = list(dict.fromkeys(r.device for r in results))
     reasons = list(dict.fromkeys(r.stop_reason for r in results))
+    shares = dict.fromkeys(devices, 0.0)
+    for r, t in zip(results, tile_list):
+        shares[r.device] += t.pixels / (width * height)
     return replace(first, image=image, variance=variance, second_moment=moments, tile=None,
                    image_size=(width, height),
                    invalid=sum(r.invalid for r in results), seconds=sum(r.seconds for r in results),
                    tracking_cutoffs=sum(r.tracking_cutoffs for r in results), device=", ".join(devices),
-                   build_seconds=sum(r.build_seconds for r in results),
+                   build_seconds=sum(r.build_seconds for r in results), shares=shares if len(shares) > 1 else {},
                    stop_reason="stopped" if "stopped" in reasons else reasons[0])

@@ -25,7 +25,7 @@ inline SceneData trace_scene(__global const BvhWideNode *nodes, __global const L
     return sc;
 }
 
-__kernel void trace_closest(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
+VOLCL_KERNEL void trace_closest(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
                             __global const Triangle *triangles, __global const Sphere *spheres,
                             __global const float *origins, __global const float *dirs,
                             __global float *t_out, __global int *prim_out, int n) {
@@ -38,7 +38,7 @@ __kernel void trace_closest(__global const BvhWideNode *nodes, __global const Le
     prim_out[i] = hit ? h.prim : 0x7fffffff;
 }
 
-__kernel void trace_any(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
+VOLCL_KERNEL void trace_any(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
                         __global const Triangle *triangles, __global const Sphere *spheres,
                         __global const float *origins, __global const float *dirs,
                         __global const float *t_max, __global int *occluded, int n) {

@@ -11,7 +11,7 @@ inline void load_cfg(__global const float *cfg, float3 *o, float3 *d, float3 *li
     *t_max = cfg[9];
 }
 
-__kernel void equiangular_sample(__global const float *cfg, __global const float *u, __global float *t_out,
+VOLCL_KERNEL void equiangular_sample(__global const float *cfg, __global const float *u, __global float *t_out,
                                  __global float *pdf_out, __global float *pdf_again, __global int *ok) {
     int i = get_global_id(0);
     float3 o, d, light;
@@ -23,7 +23,7 @@ __kernel void equiangular_sample(__global const float *cfg, __global const float
     pdf_again[i] = sample_equiangular_pdf(o, d, t_max, light, t);
 }
 
-__kernel void equiangular_pdf(__global const float *cfg, __global const float *t, __global float *pdf) {
+VOLCL_KERNEL void equiangular_pdf(__global const float *cfg, __global const float *t, __global float *pdf) {
     int i = get_global_id(0);
     float3 o, d, light;
     float t_max;

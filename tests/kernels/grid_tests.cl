@@ -19,21 +19,26 @@
     __global const BvhWideNode *nodes, __global const LeafPacket *leaves, __global const Triangle *triangles,   \
     __global const TriangleNormals *normals, __global const Sphere *spheres,                            \
     __global const Cylinder *cylinders, __global const ShapeInfo *shapes, __global const Bsdf *bsdfs, __global const Light *lights,         \
-    __global const float *light_tri_cdf, __global const int *light_tris, __global const Medium *media,  \
+    __global const float *light_tri_cdf, __global const int *light_tris, __global const float *env_data,  \
+    __global const Medium *media,                                                                       \
     __global const GridVolume *grids, __global const float *grid_data,                                  \
-    __global const RenderParams *params, __global const float *filter_table
+    __global const RenderParams *params, __global const float *filter_table,                            \
+    __global const TriangleUv *tri_uvs, __global const UvMap *uv_maps, __global const Texture *textures, \
+    __global const float *texels, __global const float *bsdf_tables,                                    \
+    __global const PhaseLobe *phase_lobes, __global const float *phase_tables
 #define SCENE_INIT {nodes, leaves, triangles, normals, spheres, cylinders, shapes, bsdfs, lights, light_tri_cdf, \
-                    light_tris, media, grids, grid_data, params}
+                    light_tris, env_data, media, grids, grid_data, params, tri_uvs, uv_maps, textures, texels, \
+                    bsdf_tables, phase_lobes, phase_tables}
 
 /* grid_lookup of descriptor `grid` at local points (3 floats each). */
-__kernel void lookups(__global const GridVolume *grids, __global const float *grid_data,
+VOLCL_KERNEL void lookups(__global const GridVolume *grids, __global const float *grid_data,
                       __global const float *points, __global float *out, int grid) {
     int i = get_global_id(0);
     vstore3(grid_lookup(grid_data, &grids[grid], vload3(i, points)), i, out);
 }
 
 /* Work item i: ray i % nrays (o, d, t_max as 7 floats), estimate number i / nrays. */
-__kernel void shadow_rays(SCENE_ARGS, __global const float *rays, __global float *out, __global uint *cutoffs,
+VOLCL_KERNEL void shadow_rays(SCENE_ARGS, __global const float *rays, __global float *out, __global uint *cutoffs,
                           int nrays, int medium, uint seed) {
     int i = get_global_id(0);
     SceneData sc = SCENE_INIT;
@@ -46,7 +51,7 @@ __kernel void shadow_rays(SCENE_ARGS, __global const float *rays, __global float
 }
 
 /* Free flights with path weight (1, 1, 1): out = t, scattered, weight.xyz per work item. */
-__kernel void free_flights(SCENE_ARGS, __global const float *rays, __global float *out, __global uint *cutoffs,
+VOLCL_KERNEL void free_flights(SCENE_ARGS, __global const float *rays, __global float *out, __global uint *cutoffs,
                            int nrays, int medium, uint seed) {
     int i = get_global_id(0);
     SceneData sc = SCENE_INIT;

@@ -11,7 +11,7 @@
 #include "bvh.h"
 #include "surface.h"
 
-__kernel void walk_inside(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
+VOLCL_KERNEL void walk_inside(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
                           __global const Triangle *triangles, __global const float *starts,
                           __global int *leaks, __global int *hits, int bounces) {
     int i = get_global_id(0);

@@ -16,7 +16,7 @@
 /* ---- rng ---- */
 
 /* `count` consecutive floats of the stream (seed, pixel0 + i % npix, sample0 + i / npix). */
-__kernel void rng_floats(__global float *out, uint seed, uint pixel0, uint sample0, int npix, int count) {
+VOLCL_KERNEL void rng_floats(__global float *out, uint seed, uint pixel0, uint sample0, int npix, int count) {
     int i = get_global_id(0);
     Rng r = rng_init(seed, pixel0 + (uint)(i % npix), sample0 + (uint)(i / npix));
     for (int k = 0; k < count; k++) out[i * count + k] = rng_next_float(&r);
@@ -24,7 +24,7 @@ __kernel void rng_floats(__global float *out, uint seed, uint pixel0, uint sampl
 
 /* ---- sampling.h ---- */
 
-__kernel void warp_cosine_hemisphere(__global float *dirs, __global float *pdf, uint seed) {
+VOLCL_KERNEL void warp_cosine_hemisphere(__global float *dirs, __global float *pdf, uint seed) {
     int i = get_global_id(0);
     Rng r = rng_init(seed, i, 0);
     float3 d = sample_cosine_hemisphere(rng_next_float2(&r));
@@ -32,39 +32,39 @@ __kernel void warp_cosine_hemisphere(__global float *dirs, __global float *pdf, 
     pdf[i] = sample_cosine_hemisphere_pdf(d);
 }
 
-__kernel void warp_uniform_sphere(__global float *dirs, __global float *pdf, uint seed) {
+VOLCL_KERNEL void warp_uniform_sphere(__global float *dirs, __global float *pdf, uint seed) {
     int i = get_global_id(0);
     Rng r = rng_init(seed, i, 0);
     vstore3(sample_uniform_sphere(rng_next_float2(&r)), i, dirs);
     pdf[i] = sample_uniform_sphere_pdf();
 }
 
-__kernel void warp_uniform_triangle(__global float *bary, uint seed) {
+VOLCL_KERNEL void warp_uniform_triangle(__global float *bary, uint seed) {
     int i = get_global_id(0);
     Rng r = rng_init(seed, i, 0);
     vstore2(sample_uniform_triangle(rng_next_float2(&r)), i, bary);
 }
 
-__kernel void warp_concentric_disk(__global float *pts, uint seed) {
+VOLCL_KERNEL void warp_concentric_disk(__global float *pts, uint seed) {
     int i = get_global_id(0);
     Rng r = rng_init(seed, i, 0);
     vstore2(sample_concentric_disk(rng_next_float2(&r)), i, pts);
 }
 
-__kernel void warp_uniform_cone(__global float *dirs, __global float *pdf, uint seed, float cos_max) {
+VOLCL_KERNEL void warp_uniform_cone(__global float *dirs, __global float *pdf, uint seed, float cos_max) {
     int i = get_global_id(0);
     Rng r = rng_init(seed, i, 0);
     vstore3(sample_uniform_cone(rng_next_float2(&r), cos_max), i, dirs);
     pdf[i] = sample_uniform_cone_pdf(cos_max);
 }
 
-__kernel void warp_discrete_cdf(__global const float *cdf, __global int *index, uint seed, int n) {
+VOLCL_KERNEL void warp_discrete_cdf(__global const float *cdf, __global int *index, uint seed, int n) {
     int i = get_global_id(0);
     Rng r = rng_init(seed, i, 0);
     index[i] = sample_discrete_cdf(cdf, n, rng_next_float(&r));
 }
 
-__kernel void warp_filter_offset(__global const float *table, __global float *offset, uint seed, int size,
+VOLCL_KERNEL void warp_filter_offset(__global const float *table, __global float *offset, uint seed, int size,
                                  float radius) {
     int i = get_global_id(0);
     Rng r = rng_init(seed, i, 0);
@@ -73,7 +73,7 @@ __kernel void warp_filter_offset(__global const float *table, __global float *of
 
 /* ---- media.h ---- */
 
-__kernel void medium_distance(__global const Medium *m, __global float *t, __global int *scattered,
+VOLCL_KERNEL void medium_distance(__global const Medium *m, __global float *t, __global int *scattered,
                               __global float *weight, __global float *emission, uint seed, float t_max,
                               float beta_r, float beta_g, float beta_b) {
     int i = get_global_id(0);
@@ -87,53 +87,94 @@ __kernel void medium_distance(__global const Medium *m, __global float *t, __glo
     vstore3(ms.emission, i, emission);
 }
 
-__kernel void medium_tr(__global const Medium *m, __global const float *t, __global float *tr) {
+VOLCL_KERNEL void medium_tr(__global const Medium *m, __global const float *t, __global float *tr) {
     int i = get_global_id(0);
     vstore3(medium_transmittance(m, t[i]), i, tr);
 }
 
 /* ---- phase.h ---- */
 
-/* d_out around the travel direction d_in (3 floats), the returned pdf, and phase_eval of the
- * sampled direction. */
-__kernel void phase_sample_dirs(__global const Medium *m, __global const float *d_in, __global float *d_out,
-                                __global float *pdf, __global float *eval, uint seed) {
+/* The phase functions read the medium, its lobes and their tables through the scene bundle. */
+#define PHASE_SCENE SceneData sc; sc.media = m; sc.phase_lobes = lobes; sc.phase_tables = tables
+
+/* d_out around the travel direction d_in (3 floats), the returned pdf and weight, and phase_eval_pdf
+ * of the sampled direction (value and pdf). */
+VOLCL_KERNEL void phase_sample_dirs(__global const Medium *m, __global const PhaseLobe *lobes,
+                                __global const float *tables, __global const float *d_in, __global float *d_out,
+                                __global float *pdf, __global float *eval, __global float *eval_pdf,
+                                __global float *weight, uint seed) {
     int i = get_global_id(0);
+    PHASE_SCENE;
     Rng r = rng_init(seed, i, 0);
     float3 din = vload3(0, d_in), d;
-    pdf[i] = phase_sample(m, din, rng_next_float2(&r), &d);
+    float w, ep;
+    pdf[i] = phase_sample(&sc, m, din, rng_next_float2(&r), &r, &d, &w);
     vstore3(d, i, d_out);
-    eval[i] = phase_eval(m, din, d);
+    weight[i] = w;
+    eval[i] = phase_eval_pdf(&sc, m, din, d, &ep);
+    eval_pdf[i] = ep;
+}
+
+/* phase_eval_pdf from d_in (3 floats) towards each d_out[i]. */
+VOLCL_KERNEL void phase_eval_dirs(__global const Medium *m, __global const PhaseLobe *lobes,
+                              __global const float *tables, __global const float *d_in,
+                              __global const float *d_out, __global float *value, __global float *pdf) {
+    int i = get_global_id(0);
+    PHASE_SCENE;
+    float p;
+    value[i] = phase_eval_pdf(&sc, m, vload3(0, d_in), vload3(i, d_out), &p);
+    pdf[i] = p;
 }
 
 /* phase_eval between +z and the direction at cos_theta[i] from it. */
-__kernel void phase_eval_cos(__global const Medium *m, __global const float *cos_theta, __global float *value) {
+VOLCL_KERNEL void phase_eval_cos(__global const Medium *m, __global const PhaseLobe *lobes,
+                             __global const float *tables, __global const float *cos_theta, __global float *value) {
     int i = get_global_id(0);
+    PHASE_SCENE;
     float c = cos_theta[i];
     float3 d_out = (float3)(sqrt(fmax(0.0f, 1.0f - c * c)), 0.0f, c);
-    value[i] = phase_eval(m, (float3)(0.0f, 0.0f, 1.0f), d_out);
+    value[i] = phase_eval(&sc, m, (float3)(0.0f, 0.0f, 1.0f), d_out);
 }
 
 /* HG at distance w[i] from its peak. */
-__kernel void phase_hg_eval_at_w(__global const float *w, __global float *value, float g) {
+VOLCL_KERNEL void phase_hg_eval_at_w(__global const float *w, __global float *value, float g) {
     int i = get_global_id(0);
     value[i] = phase_hg_eval_w(g, w[i]);
 }
 
-__kernel void hg_sample_cos(__global float *c, uint seed, float g) {
+VOLCL_KERNEL void hg_sample_cos(__global float *c, uint seed, float g) {
     int i = get_global_id(0);
     Rng r = rng_init(seed, i, 0);
     float w = phase_hg_sample_w(fabs(g), rng_next_float(&r));
     c[i] = g >= 0.0f ? 1.0f - w : w - 1.0f;
 }
 
+/* The Fournier-Forand lobe's value and table pdf at s[i] = sin^2(theta / 2) (at the floor, where
+ * the lobe counts value = pdf, both are the pdf). */
+VOLCL_KERNEL void phase_ff_at_s(__global const PhaseLobe *lobes, __global const float *tables,
+                            __global const float *s, __global float *value, __global float *pdf) {
+    int i = get_global_id(0);
+    SceneData sc;
+    sc.phase_tables = tables;
+    float p;
+    value[i] = phase_ff_eval_pdf(&sc, &lobes[0], s[i], &p);
+    pdf[i] = p;
+}
+
+/* Rayleigh cosines from u[i]. */
+VOLCL_KERNEL void phase_rayleigh_cos(__global const float *u, __global float *c) {
+    int i = get_global_id(0);
+    c[i] = phase_rayleigh_sample_cos(u[i]);
+}
+
 /* ---- bsdf.h ---- */
 
-/* One bsdf_sample per item for wo[i]; u1[i] >= 0 replaces the random component choice (edge cases).
- * info: (sampled, delta). The sampled wi is evaluated again with bsdf_eval. */
-__kernel void bsdf_sample_dirs(__global const Bsdf *b, __global const float *wo_in, __global const float *u1_in,
-                               __global float *wi_out, __global float *weight, __global float *pdf,
-                               __global float *eta, __global int *info, __global float *value,
+/* One bsdf_sample per item for wo[i] with the bsdf's constants in the identity frame; u1[i] >= 0
+ * replaces the random component choice (edge cases). info: (sampled, delta, null event). The sampled
+ * wi is evaluated again with bsdf_eval. */
+VOLCL_KERNEL void bsdf_sample_dirs(__global const Bsdf *b, __global const float *tables, __global const float *wo_in,
+                               __global const float *u1_in, __global float *wi_out, __global float *weight,
+                               __global float *pdf, __global float *eta, __global int *info, __global float *value,
                                __global float *eval_pdf, uint seed) {
     int i = get_global_id(0);
     Rng r = rng_init(seed, i, 0);
@@ -141,33 +182,39 @@ __kernel void bsdf_sample_dirs(__global const Bsdf *b, __global const float *wo_
     float2 u2 = rng_next_float2(&r);
     if (u1_in[i] >= 0.0f) u1 = u1_in[i];
     float3 wo = vload3(i, wo_in);
+    BsdfVertex v = bsdf_vertex_local(b, tables, wo);
     BsdfSample s;
     s.wi = (float3)(0.0f);
     s.weight = (float3)(0.0f);
     s.pdf = 0.0f;
+    s.eta = 1.0f;
     s.delta = false;
-    bool ok = bsdf_sample(b, wo, u1, u2, &s);
+    s.null_event = false;
+    bool ok = bsdf_sample(&v, wo, u1, u2, &s);
     vstore3(ok ? s.wi : (float3)(0.0f), i, wi_out);
     vstore3(ok ? s.weight : (float3)(0.0f), i, weight);
     pdf[i] = ok ? s.pdf : 0.0f;
     eta[i] = s.eta;
-    info[2 * i] = ok ? 1 : 0;
-    info[2 * i + 1] = (ok && s.delta) ? 1 : 0;
+    info[3 * i] = ok ? 1 : 0;
+    info[3 * i + 1] = (ok && s.delta) ? 1 : 0;
+    info[3 * i + 2] = (ok && s.null_event) ? 1 : 0;
     float p;
-    vstore3(bsdf_eval(b, wo, ok ? s.wi : (float3)(0.0f, 0.0f, 1.0f), &p), i, value);
+    vstore3(bsdf_eval(&v, wo, ok ? s.wi : (float3)(0.0f, 0.0f, 1.0f), &p), i, value);
     eval_pdf[i] = p;
 }
 
 /* bsdf_eval for host-given pairs (wo, wi). */
-__kernel void bsdf_eval_pairs(__global const Bsdf *b, __global const float *wo, __global const float *wi,
-                              __global float *value, __global float *pdf) {
+VOLCL_KERNEL void bsdf_eval_pairs(__global const Bsdf *b, __global const float *tables, __global const float *wo,
+                              __global const float *wi, __global float *value, __global float *pdf) {
     int i = get_global_id(0);
+    float3 o = vload3(i, wo);
+    BsdfVertex v = bsdf_vertex_local(b, tables, o);
     float p;
-    vstore3(bsdf_eval(b, vload3(i, wo), vload3(i, wi), &p), i, value);
+    vstore3(bsdf_eval(&v, o, vload3(i, wi), &p), i, value);
     pdf[i] = p;
 }
 
-__kernel void fresnel_dielectric_grid(__global const float *cos_i, __global float *f, __global float *cos_t,
+VOLCL_KERNEL void fresnel_dielectric_grid(__global const float *cos_i, __global float *f, __global float *cos_t,
                                       float eta) {
     int i = get_global_id(0);
     float ct;
@@ -175,7 +222,7 @@ __kernel void fresnel_dielectric_grid(__global const float *cos_i, __global floa
     cos_t[i] = ct;
 }
 
-__kernel void fresnel_conductor_grid(__global const float *cos_i, __global const float *eta_k, __global float *f) {
+VOLCL_KERNEL void fresnel_conductor_grid(__global const float *cos_i, __global const float *eta_k, __global float *f) {
     int i = get_global_id(0);
     vstore3(fresnel_conductor(cos_i[i], vload3(0, eta_k), vload3(1, eta_k)), i, f);
 }

@@ -6,7 +6,7 @@
 #include "scene.h"
 #include "bvh.h"
 
-__kernel void trace_rays(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
+VOLCL_KERNEL void trace_rays(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
                          __global const Triangle *triangles, __global const Sphere *spheres,
                          __global const float *origins, __global const float *dirs,
                          __global float *t_out, __global int *prim_out, __global int *occluded_out,

@@ -38,6 +38,12 @@ def positive(name: str, value: float) -> float:
     return value
 
 
+def nonneg(name: str, value: float) -> float:
+    if not value >= 0:
+        raise CheckError(f"'{name}' must be >= 0, got {value}")
+    return value
+
+
 def nonneg_color(name: str, value: np.ndarray) -> np.ndarray:
     if (value < 0).any():
         raise CheckError(f"'{name}' must be >= 0, got {value.tolist()}")
@@ -58,11 +64,13 @@ def hg_g(name: str, g: float) -> float:
 
 def volume_range(name: str, volume, upper: float | None) -> None:
     """sigma_t values must be >= 0; albedo values must also be <= 1 (a Volume, const or grid)."""
-    values = volume.data if volume.kind == "grid" else volume.value
+    values = volume.values()
     low, high = float(np.min(values)), float(np.max(values))
     if low < 0 or (upper is not None and high > upper):
         allowed = ">= 0" if upper is None else f"in [0, {upper:g}]"
-        found = f" in {volume.filename}" if volume.kind == "grid" else ""
+        found = f" in {volume.filename}" if volume.kind != "const" else ""
+        if volume.kind == "sparse":
+            found += f" (grid '{volume.grid_name}')"
         raise CheckError(f"'{name}' values must be {allowed}; found values from {low:g} to "
                          f"{high:g}{found}")
 
@@ -73,8 +81,7 @@ def medium_limits(medium) -> None:
     from .model import Volume
 
     def biggest(value):
-        return float(np.max(value.data if value.kind == "grid" else value.value)) \
-            if isinstance(value, Volume) else float(np.max(value))
+        return float(np.max(value.values())) if isinstance(value, Volume) else float(np.max(value))
     sigma_t = biggest(medium.sigma_t) * medium.scale
     limits = [("sigma_t (times scale)", sigma_t)]
     if medium.radiance is not None:
@@ -105,6 +112,32 @@ def camera_transform(to_world: np.ndarray, kind: str = "perspective") -> np.ndar
         # As in Mitsuba 3: ray directions and the field of view assume an unscaled frame.
         raise CheckError("the camera's transform may rotate, translate and mirror, but not scale or shear")
     return to_world
+
+
+def envmap_transform(to_world: np.ndarray) -> np.ndarray:
+    """An envmap's to_world may rotate and mirror only: Mitsuba 3.9 turns directions with it without
+    normalizing them, so a scale or shear distorts its image and its sampling; a translation does
+    nothing to a map at infinity."""
+    scale = tf.similarity_scale(to_world)
+    if scale is None or abs(scale - 1) > 1e-4:
+        raise CheckError("an envmap's to_world may rotate and mirror, but not scale or shear (Mitsuba 3.9 "
+                         "turns directions with it without normalizing them, which distorts the map and its "
+                         "sampling)")
+    return to_world
+
+
+def spot_cutoff(value: float) -> float:
+    """A spot light's cutoff angle: (0, 180] degrees."""
+    if not 0 < value <= 180:
+        raise CheckError(f"'cutoff_angle' must lie in (0, 180] degrees, got {value}")
+    return value
+
+
+def spot_beam(value: float) -> float:
+    """A spot light's beam width: [0, 180] degrees."""
+    if not 0 <= value <= 180:
+        raise CheckError(f"'beam_width' must lie in [0, 180] degrees, got {value}")
+    return value
 
 
 def direction(value: np.ndarray) -> np.ndarray:

@@ -23,7 +23,7 @@ def srgb_decode(encoded: np.ndarray) -> np.ndarray:
 
 def read_image(path: str, raw: bool = False, where=None) -> np.ndarray:
     """Linear float32 pixels (h, w, c) of an image file, rows top to bottom as stored; c is the file's
-    channel count (alpha kept). Integer formats are sRGB-decoded unless `raw` (linear data such as
+    channel count (alpha kept, colours as stored, not multiplied by it). Integer formats are sRGB-decoded unless `raw` (linear data such as
     roughness or normal maps); float formats are read as they are. `where` is a callable turning a
     message into the VolclError to raise (naming file, line, element), so every error says where
     the image was asked for and the path tried."""
@@ -33,7 +33,11 @@ def read_image(path: str, raw: bool = False, where=None) -> np.ndarray:
     if not os.path.isfile(path):
         raise fail(f"image file not found (or not a regular file): {path}")
     import OpenImageIO as oiio
-    inp = oiio.ImageInput.open(path)
+    # the stored colours, not multiplied by alpha: OpenImageIO associates the alpha of PNG and other
+    # unassociated-alpha formats unless told not to, while Mitsuba drops alpha as it is stored
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
+    inp = oiio.ImageInput.open(path, config)
     if inp is None:
         raise fail(f"cannot read image {path}: {oiio.geterror() or 'unknown format'}")
     try:

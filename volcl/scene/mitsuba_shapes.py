@@ -21,10 +21,8 @@ _COMMON_NOTES = {"silhouette_sampling_weight": "it steers Mitsuba's differentiab
 _FILE_PARAMS = {"filename": "string", "face_normals": "bool", "flip_normals": "bool", **_TO_WORLD}
 
 SPECS = {
-    "obj": Spec(_FILE_PARAMS, children=_CHILDREN,
-                ignored={**_COMMON_NOTES, "flip_tex_coords": "volcl does not texture yet, so texture "
-                                                              "coordinates change nothing"}),
-    "ply": Spec(_FILE_PARAMS, children=_CHILDREN, ignored=_COMMON_NOTES),
+    "obj": Spec({**_FILE_PARAMS, "flip_tex_coords": "bool"}, children=_CHILDREN, ignored=_COMMON_NOTES),
+    "ply": Spec({**_FILE_PARAMS, "flip_tex_coords": "bool"}, children=_CHILDREN, ignored=_COMMON_NOTES),
     "serialized": Spec({**_FILE_PARAMS, "shape_index": "int"}, children=_CHILDREN, ignored=_COMMON_NOTES),
     **{kind: Spec({"flip_normals": "bool", **_TO_WORLD}, children=_CHILDREN, ignored=_COMMON_NOTES)
        for kind in PRIMITIVES},
@@ -67,10 +65,17 @@ def build_shape(node: Node):
                            face_normals=node.bool("face_normals", False), flip_normals=flip,
                            smooth_normals=mesh.normals is None and node.type not in PRIMITIVES,
                            normal_matrix=normal_matrix)
+    if node.type == "disk":
+        shape.uv_map = "disk"
     _attach_emitter_and_media(node, shape, emitter)
     objects.check_shape(node, shape)
     shape.id = node.element.attrs.get("id", "")
     return shape
+
+
+# Mitsuba flips the v of OBJ texture coordinates by default (OBJ's v runs up the image, Mitsuba's
+# down its rows), of PLY ones only when asked; serialized files are read as stored
+_FLIP_V_DEFAULT = {"obj": True, "ply": False}
 
 
 def _mesh(node: Node) -> meshes.TriangleMesh:
@@ -79,7 +84,10 @@ def _mesh(node: Node) -> meshes.TriangleMesh:
     shape_index = node.int("shape_index", 0)
     if shape_index < 0:
         raise node.fail("shape_index", f"'shape_index' must be >= 0, got {shape_index}")
-    return objects.mesh_from_file(node, "filename", node.type, shape_index)
+    mesh = objects.mesh_from_file(node, "filename", node.type, shape_index)
+    if mesh.uvs is not None and node.bool("flip_tex_coords", _FLIP_V_DEFAULT.get(node.type, False)):
+        mesh = mesh._replace(uvs=np.column_stack([mesh.uvs[:, 0], 1.0 - mesh.uvs[:, 1]]))
+    return mesh
 
 
 def _cylinder(node: Node, to_world: np.ndarray, bsdf, flip: bool):

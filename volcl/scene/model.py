@@ -29,19 +29,51 @@ class Source:
 
 @dataclass
 class Phase:
-    kind: str = "isotropic"          # 'isotropic' | 'hg'
-    g: float = 0.0
+    """A phase function; volcl/phase.py says what each kind means and how the kernels get it."""
+    kind: str = "isotropic"          # 'isotropic' | 'hg' | 'rayleigh' | 'blend' | 'tabulated' | 'draine'
+                                     # | 'cornette_shanks' | 'fournier_forand' | 'mie'
+    g: float = 0.0                   # hg, draine, cornette_shanks
+    alpha: float = 0.0               # draine
+    weight: float = 0.5              # blend: (1 - weight) * phases[0] + weight * phases[1]
+    phases: tuple = ()               # blend: the two phases blended
+    values: Optional[np.ndarray] = None  # tabulated: values at cosines evenly spaced over [-1, 1], 1 forward
+    n: float = 0.0                   # fournier_forand: relative refractive index of the particles
+    mu: float = 0.0                  # fournier_forand: slope of the Junge size distribution
+    diameter: float = 0.0            # mie: droplet diameter in micrometres
+    tolerance: float = 1e-3          # fournier_forand: bound on |value / pdf - 1| of its sampling table
 
 
 @dataclass
 class Volume:
-    """A scalar or rgb field. kind 'const': value only. kind 'grid': data of shape (z, y, x, c)."""
-    kind: str                        # 'const' | 'grid'
+    """A scalar or rgb field. kind 'const': value only. kind 'grid': data of shape (z, y, x, c).
+    kind 'sparse': an OpenVDB or NanoVDB grid in bricks (volcl.vdb.SparseGrid), filling the unit
+    cube of to_world as a grid of sparse.padded_counts() * 8 voxels would."""
+    kind: str                        # 'const' | 'grid' | 'sparse'
     value: np.ndarray = field(default_factory=lambda: rgb(1.0))
     data: Optional[np.ndarray] = None
     to_world: np.ndarray = field(default_factory=lambda: np.eye(4))
     filter: str = "trilinear"        # 'trilinear' | 'nearest'
     filename: str = ""
+    sparse: Optional[object] = None  # volcl.vdb.SparseGrid
+    grid_name: str = ""              # sparse: the grid's name in its file
+
+    @property
+    def channels(self) -> int:
+        if self.kind == "grid":
+            return self.data.shape[-1]
+        if self.kind == "sparse":
+            return self.sparse.channels
+        return 1 if np.ptp(self.value) == 0 else 3
+
+    def values(self) -> np.ndarray:
+        """Every value the field holds, (n, channels) or (3,) for a constant (range checks)."""
+        if self.kind == "grid":
+            return self.data
+        if self.kind == "sparse":
+            sg = self.sparse
+            return np.concatenate([sg.bricks.reshape(-1, sg.channels), sg.tile_values.reshape(-1, sg.channels),
+                                   sg.background.reshape(1, -1)])
+        return self.value
 
 
 @dataclass
@@ -54,22 +86,88 @@ class Medium:
     radiance: Optional[np.ndarray] = None    # volcl extension: emits sigma_a * radiance
     id: str = ""
     source: Optional[Source] = None
+    # volcl extension, heterogeneous media: a spatially varying emission, either the radiance
+    # itself ('radiance') or a temperature (volcl.blackbody) ('temperature'); times emission_scale
+    emission_kind: str = "none"               # 'none' | 'radiance' | 'temperature'
+    emission_volume: Optional[Volume] = None
+    emission_scale: float = 1.0
+    temperature_scale: float = 1.0
+    temperature_offset: float = 0.0
+
+    @property
+    def emissive(self) -> bool:
+        return self.emission_kind != "none" or (self.radiance is not None and bool(np.any(self.radiance > 0)))
+
+
+@dataclass
+class Texture:
+    """A texture giving a colour or float parameter (Mitsuba's bitmap and checkerboard; kernels/
+    textures.h has the lookup rules). Bitmaps hold linear float32 texels (h, w, 1 or 3), row 0 the
+    image's top row; checkerboards hold two colours (rgb arrays) or nested Textures."""
+    kind: str                        # 'bitmap' | 'checkerboard'
+    data: Optional[np.ndarray] = None
+    filter: str = "bilinear"         # bitmap: 'bilinear' | 'nearest'
+    wrap: str = "repeat"             # bitmap: 'repeat' | 'mirror' | 'clamp'
+    raw: bool = False
+    to_uv: np.ndarray = field(default_factory=lambda: np.eye(3))   # 3x3 affine map of uv
+    color0: object = field(default_factory=lambda: rgb(0.4))
+    color1: object = field(default_factory=lambda: rgb(0.2))
+    filename: str = ""
+    id: str = ""
+    source: Optional[Source] = None
+
+    def mean(self) -> float:
+        """Mitsuba's Texture::mean(): a bitmap's mean texel (luminance for colour), a checkerboard's
+        mean of its two colours."""
+        if self.kind == "bitmap":
+            d = np.asarray(self.data, np.float64)
+            return float((d[..., 0] if d.shape[-1] == 1 else d @ LUMINANCE).mean())
+        return 0.5 * (texture_mean(self.color0) + texture_mean(self.color1))
+
+
+# Mitsuba's luminance weights for linear sRGB
+LUMINANCE = np.array([0.212671, 0.715160, 0.072169])
+
+
+def texture_mean(value) -> float:
+    """mean() of a parameter: a texture's, or a constant colour's channel mean (Mitsuba's srgb)."""
+    if isinstance(value, Texture):
+        return value.mean()
+    return float(np.mean(np.asarray(value, np.float64)))
 
 
 @dataclass
 class Bsdf:
-    kind: str                        # 'diffuse' | 'dielectric' | 'conductor' | 'null'
-    reflectance: np.ndarray = field(default_factory=lambda: rgb(0.5))
+    """A bsdf. Colour parameters are rgb arrays or Textures, float ones (alpha, opacity) floats or
+    Textures. Wrappers (mask, bumpmap, normalmap) hold the bsdf they wrap in `nested`."""
+    kind: str                        # 'diffuse' | 'dielectric' | 'conductor' | 'null' | 'roughconductor' |
+                                     # 'roughdielectric' | 'plastic' | 'roughplastic' | 'thindielectric' |
+                                     # 'mask' | 'bumpmap' | 'normalmap'
+    reflectance: object = field(default_factory=lambda: rgb(0.5))   # diffuse; plastics' diffuse_reflectance
     int_ior: float = 1.5046
     ext_ior: float = 1.000277
-    eta: Optional[np.ndarray] = None          # conductor; None = perfect mirror (material="none")
-    k: Optional[np.ndarray] = None
-    specular_reflectance: np.ndarray = field(default_factory=lambda: rgb(1.0))
+    eta: object = None               # conductors; None = perfect mirror (material="none")
+    k: object = None
+    specular_reflectance: object = field(default_factory=lambda: rgb(1.0))
+    specular_transmittance: object = field(default_factory=lambda: rgb(1.0))
     twosided: bool = False
     id: str = ""
     source: Optional[Source] = None
     # a two-sided bsdf is a copy of the one it wraps; edits of that one's values reach it too
     twosided_of: Optional["Bsdf"] = None
+    material: str = ""               # conductors: the `material` preset eta and k came from
+    distribution: str = "beckmann"   # microfacet bsdfs
+    alpha_u: object = 0.1
+    alpha_v: object = 0.1
+    anisotropic: bool = False        # given as alpha_u / alpha_v (Mitsuba's tangent-frame roughness)
+    sample_visible: bool = True
+    nonlinear: bool = False          # plastics
+    opacity: object = 0.5            # mask
+    nested: Optional["Bsdf"] = None  # mask, bumpmap, normalmap
+    map_texture: Optional[Texture] = None   # bumpmap: heights; normalmap: normals
+    scale: float = 1.0               # bumpmap
+    flip_invalid_normals: bool = True
+    use_shadowing_function: bool = True
 
 
 @dataclass
@@ -103,6 +201,7 @@ class Shape:
     smooth_normals: bool = False
     normal_matrix: Optional[np.ndarray] = None
     emitter_id: str = ""             # the area emitter's own id, if it has one
+    uv_map: str = ""                 # 'disk': a disk mesh with Mitsuba's analytic disk uvs (u = r, v = phi / 2 pi)
     group: Optional["ShapeGroup"] = None      # the shapegroup this shape belongs to, if any
 
 
@@ -127,12 +226,19 @@ class Instance:
 
 @dataclass
 class Emitter:
-    kind: str                        # 'point' | 'directional' | 'constant'
-    value: np.ndarray                # intensity (W/sr) | irradiance | radiance
-    position: Optional[np.ndarray] = None
+    kind: str                        # 'point' | 'spot' | 'directional' | 'constant' | 'envmap'
+    value: np.ndarray                # intensity (W/sr: point, spot) | irradiance | radiance; envmap: 1
+    position: Optional[np.ndarray] = None     # point; spot: to_world's origin
     direction: Optional[np.ndarray] = None    # directional: direction the light travels
     source: Optional[Source] = None
     id: str = ""
+    to_world: Optional[np.ndarray] = None     # spot, envmap: the emitter's frame (4x4)
+    cutoff_angle: float = 20.0       # spot: degrees from its axis (+z of to_world) to where it is dark
+    beam_width: float = 15.0         # spot: degrees of full intensity (falls off linearly beyond)
+    image: Optional[np.ndarray] = None        # envmap: linear pixels (h, w, c) as read (volcl.scene.images)
+    scale: float = 1.0               # envmap: radiance multiplier
+    filename: str = ""               # envmap: the image file
+    texture: Optional["Texture"] = None     # spot: Mitsuba's projection texture (a colour texture)
 
 
 @dataclass

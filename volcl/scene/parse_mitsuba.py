@@ -13,17 +13,23 @@ from dataclasses import replace
 
 import numpy as np
 
-from . import checks, mitsuba_sensors, mitsuba_shapes, objects, transform as tf
-from .model import (Bsdf, Camera, Emitter, Integrator, Medium, Phase, Scene, Sensor, Volume, rgb,
+from . import checks, mitsuba_bsdfs, mitsuba_sensors, mitsuba_shapes, objects, textures, transform as tf
+from .model import (Camera, Emitter, Integrator, Medium, Phase, Scene, Sensor, Volume, rgb,
                     select_sensor)
 from .objects import AreaLight
+from .images import read_image
 from .parse_common import Dialect, Node, Spec, medium_list
+from .phases import SPECS as PHASE_SPECS, build_phase
 from .properties import PROPERTY_TAGS
 from .shapes import bounds
 
 _TO_WORLD = {"to_world": "transform"}
 _MEDIUM_PARAMS = {"sigma_t": "color", "albedo": "color", "scale": "float",
-                  "has_spectral_extinction": "bool", "volcl_radiance": "color"}
+                  "has_spectral_extinction": "bool", "volcl_radiance": "color",
+                  "volcl_temperature": "float", "volcl_temperature_scale": "float",
+                  "volcl_temperature_offset": "float", "volcl_emission_scale": "float"}
+# the volumes a heterogeneous medium may hold, and whether each must be a one-channel (float) grid
+_MEDIUM_VOLUMES = {"sigma_t": False, "albedo": False, "volcl_radiance": False, "volcl_temperature": True}
 _MEDIUM_NOTES = {"sample_emitters": "volcl always samples emitters from medium vertices; the expected "
                                     "image is the same, only the noise differs"}
 _PATH_PARAMS = {"max_depth": "int", "rr_depth": "int", "hide_emitters": "bool"}
@@ -37,7 +43,7 @@ SPECS = {
     # films, filters and samplers at the top level do nothing until a sensor refers to them by id
     "scene": {None: Spec(attrs=("version", "id"), children=frozenset(
         {"integrator", "sensor", "shape", "bsdf", "emitter", "medium", "volume", "phase", "film",
-         "rfilter", "sampler"}))},
+         "rfilter", "sampler", "texture"}))},
     "integrator": {
         "path": Spec(_PATH_PARAMS, ignored=_INTEGRATOR_NOTES),
         "volpath": Spec(_PATH_PARAMS, ignored=_INTEGRATOR_NOTES),
@@ -50,19 +56,18 @@ SPECS = {
     },
     **mitsuba_sensors.SPECS,
     "shape": mitsuba_shapes.SPECS,
-    "bsdf": {
-        "diffuse": Spec({"reflectance": "color"}),
-        "twosided": Spec(children=frozenset({"bsdf"})),
-        "dielectric": Spec({"int_ior": "ior", "ext_ior": "ior"}),
-        "conductor": Spec({"material": "string", "eta": "color", "k": "color",
-                           "specular_reflectance": "color"}),
-        "null": Spec(),
-    },
+    "bsdf": mitsuba_bsdfs.SPECS,
+    "texture": textures.SPECS,
     "emitter": {
         "area": Spec({"radiance": "color"}),
         "point": Spec({"intensity": "color", "position": "point", **_TO_WORLD}),
         "directional": Spec({"irradiance": "color", "direction": "point", **_TO_WORLD}),
         "constant": Spec({"radiance": "color"}),
+        "spot": Spec({"intensity": "color", "cutoff_angle": "float", "beam_width": "float", **_TO_WORLD},
+                     children=frozenset({"texture"})),
+        "envmap": Spec({"filename": "string", "scale": "float", **_TO_WORLD}, ignored={
+            "mis_compensation": "volcl samples the map by its luminance as given (the expected image is the "
+                                "same, only the noise differs)"}),
     },
     "medium": {
         "homogeneous": Spec(_MEDIUM_PARAMS, children=frozenset({"phase"}), ignored=_MEDIUM_NOTES),
@@ -75,8 +80,9 @@ SPECS = {
                            ignored={"raw": "in RGB rendering the grid's values are used as they are either way",
                                     "accel": "volcl uses its own lookups (same values)"}),
         "constvolume": Spec({"value": "color", **_TO_WORLD}),
+        "volcl_vdb": Spec({"filename": "string", "grid": "string", "filter_type": "string", **_TO_WORLD}),
     },
-    "phase": {"isotropic": Spec(), "hg": Spec({"g": "float"})},
+    "phase": PHASE_SPECS,
 }
 
 
@@ -107,14 +113,45 @@ def build_scene(node: Node) -> Scene:
                                         "does: it emits nothing, as in Mitsuba")
             continue
         emitters.append(child.obj)
+    _one_environment(node)
     scene = Scene(path=ctx.path, dialect="mitsuba",
                   integrator=integrator.obj if integrator else Integrator(),
                   shapes=shapes, emitters=emitters, sensors=sensors,
                   warnings=ctx.warnings[node.first_warning:])
     select_sensor(scene, 0)
     _check_integrator(node, scene)
+    _environment_through_unbounded_medium(node, scene)
     scene.warnings = ctx.warnings[node.first_warning:]
     return scene
+
+
+def _one_environment(node: Node) -> None:
+    """Mitsuba allows one environment emitter per scene. volcl adds up several constants (its older
+    rule, which renders what their sum would), but an envmap stands alone, as in Mitsuba."""
+    env = [c for c in node.objects("emitter") if getattr(c.obj, "kind", "") in ("constant", "envmap")]
+    if len(env) > 1 and any(c.obj.kind == "envmap" for c in env):
+        first = env[0].element
+        raise env[1].element.error(f"only one environment emitter (envmap or constant) can be specified per "
+                                   f"scene, as in Mitsuba; the first is at line {first.line}")
+
+
+def _environment_through_unbounded_medium(node: Node, scene: Scene) -> None:
+    """A camera medium that no shape bounds in some direction fills space out to infinity: no light
+    of an environment emitter gets through it (volcl's answer). Mitsuba 3.9 stops its shadow rays
+    towards the environment at twice the scene's bounding radius, so its next-event estimate sees
+    the environment dimmed over that distance only (while its phase-sampled rays never escape): a
+    different image, which depends on the scene's size."""
+    medium = scene.camera.medium
+    if medium is None or not any(e.kind in ("constant", "envmap") for e in scene.emitters):
+        return
+    from ..features import escapes_unbounded
+    if escapes_unbounded(scene, scene.camera.to_world[:3, 3]):
+        node.ctx.warn(node.element, "the camera's medium is not enclosed by a shape (it reaches to infinity in "
+                                    "some direction), so no light of the environment arrives through it; Mitsuba "
+                                    "3.9 counts the environment's direct light through such a medium as if it "
+                                    "ended at twice the scene's bounding radius (a brighter image, which depends "
+                                    "on the scene's size). Bound the medium with a shape (e.g. a null sphere) to "
+                                    "render the same image in both")
 
 
 def _default_sensor(node: Node, shapes) -> Sensor:
@@ -142,10 +179,10 @@ def _check_integrator(node: Node, scene: Scene) -> None:
                                     "which Mitsuba's volpath skips")
     if integ.kind != "direct":
         return
-    delta = [e for e in scene.emitters if e.kind in ("point", "directional")]
+    delta = [e for e in scene.emitters if e.kind in ("point", "spot", "directional")]
     if integ.emitter_samples > 1 and delta:
         node.ctx.warn(node.element, f"direct with emitter_samples={integ.emitter_samples}: Mitsuba 3.9 counts "
-                                    f"each sample of a point or directional light at full weight, so these "
+                                    f"each sample of a point, spot or directional light at full weight, so these "
                                     f"lights come out {integ.emitter_samples}x as bright as with one sample; "
                                     f"volcl renders what Mitsuba renders")
     # Mitsuba's direct integrator traces surfaces only: media are not sampled and a null boundary
@@ -170,11 +207,12 @@ def _path_integrator(node: Node, scene: Scene) -> None:
         for sensor in scene.sensors:
             sensor.camera.medium = None
         scene.media = []
-    if scene.integrator.max_depth >= 0 and any(s.bsdf.kind == "null" for s in scene.shapes):
-        node.ctx.warn(node.element, "Mitsuba's path integrator counts each crossing of a null surface as "
-                                    "a bounce towards max_depth, volcl does not: paths through null "
-                                    "surfaces can be longer in volcl than in Mitsuba (use volpath, which "
-                                    "counts as volcl does)")
+    if scene.integrator.max_depth >= 0 and any(s.bsdf.kind in ("null", "mask", "thindielectric")
+                                               for s in scene.shapes):
+        node.ctx.warn(node.element, "Mitsuba's path integrator counts each crossing of a null surface as a "
+                                    "bounce towards max_depth (and each pass through a mask or thin "
+                                    "dielectric), volcl does not: such paths can be longer in volcl than in "
+                                    "Mitsuba (use volpath, which counts as volcl does)")
 
 
 def _positive_count(node: Node, name: str, default: int) -> int:
@@ -231,53 +269,6 @@ def _moment(node: Node) -> Integrator:
 
 # ---------------------------------------------------------------------------------------------
 
-def _diffuse(node: Node) -> Bsdf:
-    reflectance = node.nonneg_color("reflectance", 0.5)
-    objects.warn_if_above_one(node, "reflectance", reflectance)
-    return Bsdf("diffuse", reflectance=reflectance)
-
-
-def _twosided(node: Node) -> Bsdf:
-    inner = node.objects("bsdf")
-    if len(inner) != 1:
-        raise node.fail(None, f"twosided wraps exactly one bsdf, found {len(inner)}")
-    if inner[0].obj.kind in ("dielectric", "null"):
-        raise inner[0].element.error(f"twosided cannot wrap a {inner[0].obj.kind} bsdf: only "
-                                     f"materials without transmission can be two-sided")
-    # A copy, so that a shared bsdf referenced elsewhere stays one-sided there.
-    wrapped = inner[0].obj
-    return replace(wrapped, twosided=True, twosided_of=wrapped.twosided_of or wrapped)
-
-
-def _dielectric(node: Node) -> Bsdf:
-    return Bsdf("dielectric", int_ior=objects.ior(node, "int_ior", "bk7"),
-                ext_ior=objects.ior(node, "ext_ior", "air"))
-
-
-def _conductor(node: Node) -> Bsdf:
-    material = node.string("material", "none")
-    if material != "none":
-        raise node.fail("material", f"conductor material {material!r} is not supported; "
-                        f"supported: \"none\" (a perfect mirror, or give eta and k as rgb)")
-    bsdf = Bsdf("conductor", specular_reflectance=node.nonneg_color("specular_reflectance", 1.0))
-    if node.has("eta") or node.has("k"):
-        # Mitsuba's defaults when either is given: eta 0, k 1 (which is itself a perfect mirror).
-        bsdf.eta = node.nonneg_color("eta", 0.0, kind="unbounded")
-        bsdf.k = node.nonneg_color("k", 1.0, kind="unbounded")
-    return bsdf
-
-
-_BSDFS = {"diffuse": _diffuse, "twosided": _twosided, "dielectric": _dielectric,
-          "conductor": _conductor, "null": lambda node: Bsdf("null")}
-
-
-def build_bsdf(node: Node) -> Bsdf:
-    bsdf = _BSDFS[node.type](node)
-    bsdf.id = node.element.attrs.get("id", "")
-    bsdf.source = node.source()
-    return bsdf
-
-
 # ---------------------------------------------------------------------------------------------
 
 def _exclusive(node: Node, a: str, b: str) -> None:
@@ -306,9 +297,52 @@ def _directional(node: Node) -> Emitter:
                    source=node.source())
 
 
+def _spot(node: Node) -> Emitter:
+    """Mitsuba's spot: at to_world's origin, along its +z; full intensity within beam_width (default
+    3/4 of cutoff_angle), falling linearly in angle to zero at cutoff_angle (degrees)."""
+    to_world = node.transform("to_world")
+    cutoff = node.checked("cutoff_angle", checks.spot_cutoff, node.float("cutoff_angle", 20.0))
+    beam = node.checked("beam_width", checks.spot_beam, node.float("beam_width", cutoff * 0.75))
+    if beam > cutoff:
+        node.ctx.warn(node.at("beam_width"), f"'beam_width' {beam:g} exceeds 'cutoff_angle' {cutoff:g}: the spot "
+                                             f"is a hard-edged cone of the cutoff angle, as in Mitsuba")
+    # Mitsuba's projection texture: the spot's intensity times the texture at the direction's place
+    # in the cone's square (kernels/lights.h spot_texture_uv); only a texture element, as Mitsuba
+    # refuses a constant one
+    textures.check_texture_names(node, ("texture",))
+    child = textures.texture_child(node, "texture")
+    return Emitter("spot", node.nonneg_color("intensity", 1.0, kind="emission"),
+                   position=tf.apply_point(to_world, np.zeros(3)), to_world=to_world, cutoff_angle=cutoff,
+                   beam_width=beam, source=node.source(), texture=child.obj if child is not None else None)
+
+
+def _envmap(node: Node) -> Emitter:
+    """Mitsuba's envmap: a latitude-longitude image (any aspect ratio, as Mitsuba reads it) times
+    `scale`, turned by to_world (volcl.envmap, kernels/envmap.h)."""
+    path = objects.resolve_path(node, "filename", "environment map")
+    image = read_image(path, where=lambda message: node.fail("filename", message))
+    scale = node.float("scale", 1.0)
+    if not scale >= 0:
+        raise node.fail("scale", f"'scale' must be >= 0, got {scale}")
+    peak = float(image.max()) * scale if image.size else 0.0
+    if not peak <= checks.FLOAT32_MAX:
+        raise node.fail("scale", f"the environment map's brightest texel times 'scale' is {peak:.4g}, beyond the "
+                                 f"single-precision range volcl renders in (<= {checks.FLOAT32_MAX:.7g})")
+    to_world = node.checked("to_world", checks.envmap_transform, node.transform("to_world"))
+    height, width = image.shape[:2]
+    if width != 2 * height:
+        node.ctx.warn(node.at("filename"), f"the environment map {path} is {width}x{height} texels, not 2:1: it is "
+                                           f"read as a latitude-longitude map all the same (columns over 360 "
+                                           f"degrees of longitude, rows over 180 of latitude), as Mitsuba reads it")
+    return Emitter("envmap", rgb(1.0), to_world=to_world, image=image, scale=scale, filename=path,
+                   source=node.source())
+
+
 _EMITTERS = {
     "area": lambda node: AreaLight(node.nonneg_color("radiance", 1.0, kind="emission")),
     "point": _point,
+    "spot": _spot,
+    "envmap": _envmap,
     "directional": _directional,
     "constant": lambda node: Emitter("constant", node.nonneg_color("radiance", 1.0, kind="emission"),
                                      source=node.source()),
@@ -326,6 +360,7 @@ def build_emitter(node: Node):
 
 def build_medium(node: Node) -> Medium:
     phase = node.single("phase")
+    volumes = {}
     if node.type == "homogeneous":
         sigma_t = node.nonneg_color("sigma_t", 1.0)
         albedo = node.unit_color("albedo", 0.75)
@@ -344,6 +379,7 @@ def build_medium(node: Node) -> Medium:
                     radiance=node.nonneg_color("volcl_radiance", kind="emission")
                     if node.has("volcl_radiance") else None,
                     id=node.element.attrs.get("id", ""), source=node.source())
+    _emission(node, medium, volumes)
     objects.check_medium(node, medium)
     _spectral_extinction(node, medium)
     return medium
@@ -369,13 +405,65 @@ def _spectral_extinction(node: Node, medium: Medium) -> None:
 def _named_volumes(node: Node) -> dict:
     volumes = {}
     for child in node.objects("volume"):
-        if child.name not in ("sigma_t", "albedo"):
-            raise child.element.error(f"a volume inside a medium needs name=\"sigma_t\" or "
-                                      f"name=\"albedo\", got name={child.name!r}")
+        if child.name not in _MEDIUM_VOLUMES:
+            raise child.element.error("a volume inside a medium needs name=" + ", ".join(
+                f'"{n}"' for n in _MEDIUM_VOLUMES) + f", got name={child.name!r}")
         if child.name in volumes or node.has(child.name):
             raise child.element.error(f"'{child.name}' is given twice")
+        if _MEDIUM_VOLUMES[child.name] or child.name == "sigma_t" and child.obj.kind == "sparse":
+            _one_channel(child)
         volumes[child.name] = child
     return volumes
+
+
+def _one_channel(child) -> None:
+    v = child.obj
+    if v.kind != "const" and v.channels != 1:
+        what = (f"grid '{v.grid_name}' of {v.filename} holds {v.sparse.value_type} values"
+                if v.kind == "sparse" else f"{v.filename} holds {v.channels} channels")
+        raise child.element.error(f"'{child.name}' needs a float grid, but {what}; choose a float grid "
+                                  f"(density, temperature, ...)")
+
+
+def _emission(node: Node, medium: Medium, volumes: dict) -> None:
+    """volcl_radiance (a colour, or a volume in a heterogeneous medium) or volcl_temperature (a float,
+    or a volume in a heterogeneous medium, with pbrt-v4's blackbody meaning: volcl.blackbody), each
+    times volcl_emission_scale. A constant temperature becomes the radiance of its blackbody."""
+    from .. import blackbody
+    temp_params = ("volcl_temperature_scale", "volcl_temperature_offset")
+    has_temp = node.has("volcl_temperature") or "volcl_temperature" in volumes
+    has_radiance = node.has("volcl_radiance") or "volcl_radiance" in volumes
+    if has_temp and has_radiance:
+        where = volumes["volcl_temperature"].element if "volcl_temperature" in volumes else node.at("volcl_temperature")
+        raise where.error("a medium emits from 'volcl_radiance' or from 'volcl_temperature', not both")
+    for name in temp_params:
+        if node.has(name) and not has_temp:
+            node.ctx.warn(node.at(name), f"'{name}' is ignored: the medium has no 'volcl_temperature'")
+    medium.emission_scale = node.checked("volcl_emission_scale", checks.nonneg, "volcl_emission_scale",
+                                         node.float("volcl_emission_scale", 1.0))
+    medium.temperature_scale = node.checked("volcl_temperature_scale", checks.nonneg, "volcl_temperature_scale",
+                                            node.float("volcl_temperature_scale", 1.0))
+    medium.temperature_offset = node.float("volcl_temperature_offset", 0.0)
+    if not np.isfinite(medium.temperature_offset):
+        raise node.fail("volcl_temperature_offset", "'volcl_temperature_offset' must be finite")
+    if node.has("volcl_emission_scale") and not (has_temp or has_radiance):
+        node.ctx.warn(node.at("volcl_emission_scale"), "'volcl_emission_scale' is ignored: the medium "
+                                                       "has no 'volcl_radiance' or 'volcl_temperature'")
+    for name in ("volcl_radiance", "volcl_temperature"):
+        if name in volumes and volumes[name].obj.kind != "const":
+            medium.emission_kind = name[len("volcl_"):]
+            medium.emission_volume = volumes[name].obj
+            objects.check_volume_range(volumes[name].element, name, medium.emission_volume, None)
+            return
+    if has_temp:
+        value = (float(volumes["volcl_temperature"].obj.value[0]) if "volcl_temperature" in volumes
+                 else node.float("volcl_temperature"))
+        t = (value - medium.temperature_offset) * medium.temperature_scale
+        medium.radiance = medium.emission_scale * blackbody.rgb(t)
+    elif "volcl_radiance" in volumes:
+        medium.radiance = medium.emission_scale * np.asarray(volumes["volcl_radiance"].obj.value, np.float64)
+    elif medium.radiance is not None:
+        medium.radiance = medium.emission_scale * medium.radiance
 
 
 def _volume_param(node: Node, volumes: dict, name: str, default: float, upper) -> Volume:
@@ -391,6 +479,8 @@ def build_volume(node: Node) -> Volume:
     if node.type == "constvolume":
         return Volume("const", value=node.color("value", 1.0, kind="unbounded"),
                       to_world=node.transform("to_world"))
+    if node.type == "volcl_vdb":
+        return objects.vdb_volume(node)
     node.choice("wrap_mode", ("clamp",), "clamp")
     data, path, bbox = objects.grid_from_file(node, "filename")
     to_world = node.transform("to_world")
@@ -410,10 +500,6 @@ def build_volume(node: Node) -> Volume:
                   filename=path)
 
 
-def build_phase(node: Node) -> Phase:
-    return objects.phase_hg(node, "g", 0.8) if node.type == "hg" else Phase()
-
-
 DIALECT = Dialect(
     name="mitsuba",
     property_tags=PROPERTY_TAGS - {"color"},
@@ -422,7 +508,8 @@ DIALECT = Dialect(
         "scene": build_scene, "integrator": build_integrator,
         "sensor": mitsuba_sensors.build_sensor, "film": mitsuba_sensors.build_film,
         "rfilter": mitsuba_sensors.build_rfilter, "sampler": mitsuba_sensors.build_sampler,
-        "shape": mitsuba_shapes.build_shape, "bsdf": build_bsdf, "emitter": build_emitter,
+        "shape": mitsuba_shapes.build_shape, "bsdf": mitsuba_bsdfs.build_bsdf, "emitter": build_emitter,
+        "texture": textures.build_texture,
         "medium": build_medium, "volume": build_volume, "phase": build_phase,
     },
     rotate_axis_as_given=True,

@@ -1,0 +1,137 @@
+"""Renders one tiny scene of a feature family on the only OpenCL device present; run by
+tests/test_oclgrind.py under `oclgrind`, which simulates that device and logs every uninitialized
+read, out-of-bounds access and data race. Usage: python oclgrind_worker.py FAMILY.
+
+Also usable by hand: `VOLCL_BUILD_OPTIONS=-cl-opt-disable oclgrind --uninitialized python
+tests/oclgrind_worker.py fog`."""
+import sys
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path[:0] = [str(HERE), str(HERE.parent)]
+
+from scenebuild import (camera, constant_env, diffuse, furnace, look_at, medium, quad_mesh,  # noqa: E402
+                        scene, sphere)
+from volcl import device as devmod  # noqa: E402
+from volcl.features import all_features  # noqa: E402
+from volcl.renderer import Renderer  # noqa: E402
+from volcl.scene import load  # noqa: E402
+from volcl.scene.model import Bsdf, Emitter, Shape, rgb  # noqa: E402
+
+SCENES = HERE.parent / "scenes"
+
+
+def shipped(name):
+    return lambda: load(SCENES / f"{name}.xml")
+
+
+def lights():
+    """Every kind of light at once over diffuse, conductor and dielectric surfaces."""
+    fv, ff = quad_mesh((0, -1, 0), (3, 0, 0), (0, 0, -3))          # floor facing +y
+    lv, lf = quad_mesh((0, 2, 0), (0.5, 0, 0), (0, 0, 0.5))        # area light facing -y
+    shapes = [Shape("mesh", diffuse(0.6), vertices=fv, faces=ff),
+              Shape("mesh", diffuse(0.0), vertices=lv, faces=lf, emitter_radiance=rgb(5.0)),
+              sphere((-0.6, -0.5, 0), 0.5, Bsdf("conductor", reflectance=rgb(0.9))),
+              sphere((0.6, -0.5, 0), 0.5, Bsdf("dielectric", int_ior=1.5, ext_ior=1.0))]
+    emitters = [Emitter("point", rgb(3.0), position=np.array([1.0, 1.5, 1.0])),
+                Emitter("directional", rgb(1.0), direction=np.array([0.3, -1.0, -0.2])),
+                constant_env(0.2)]
+    return scene(shapes, emitters, cam=camera(8, 8, fov=50, to_world=look_at((0, 0.5, 4), (0, -0.5, 0))))
+
+
+def emissive_media():
+    """A chromatic, anisotropic, emissive medium in a closed emitting box."""
+    return furnace(0.3, radiance=0.5, medium=medium([1.0, 2.0, 0.5], [0.3, 0.6, 0.0], g=0.4, radiance=0.7))
+
+
+SENSOR = """<sensor type="{kind}">{extra}
+    <transform name="to_world"><lookat origin="0, 0.5, 4" target="0, -0.3, 0" up="0, 1, 0"/></transform>
+    <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/></film>
+</sensor>"""
+ROOM = """<shape type="rectangle"><transform name="to_world"><scale value="0.5"/><rotate x="1" angle="90"/>
+    <translate y="2"/></transform><emitter type="area"><rgb name="radiance" value="8"/></emitter></shape>
+<shape type="rectangle"><transform name="to_world"><scale value="3"/><rotate x="1" angle="-90"/>
+    <translate y="-1"/></transform><bsdf type="diffuse"><rgb name="reflectance" value="0.7, 0.5, 0.3"/></bsdf>
+</shape>"""
+
+
+def mitsuba(body):
+    from volcl.scene import load_string
+    return lambda: load_string(f'<scene version="3.0.0">{body}</scene>')
+
+
+CYLINDERS = mitsuba(SENSOR.format(kind="perspective", extra='<float name="fov" value="45"/>') + ROOM + """
+<shape type="cylinder"><float name="radius" value="0.3"/><point name="p0" value="-0.6, -1, 0"/>
+    <point name="p1" value="-0.6, 0.2, 0"/><bsdf type="diffuse"/></shape>
+<shape type="cylinder"><float name="radius" value="0.3"/><point name="p0" value="0.6, -1, 0"/>
+    <point name="p1" value="0.6, 0.2, 0.3"/><bsdf type="dielectric"/></shape>""")
+THINLENS = mitsuba(SENSOR.format(kind="thinlens", extra='<float name="fov" value="45"/><float name="aperture_radius" '
+                                 'value="0.2"/><float name="focus_distance" value="3.5"/>') + ROOM
+                   + '<shape type="sphere"><float name="radius" value="0.4"/></shape>')
+ORTHOGRAPHIC = mitsuba(SENSOR.format(kind="orthographic", extra="").replace("<lookat", '<scale x="1.5" y="1.5"/><lookat')
+                       + ROOM + '<shape type="sphere"><float name="radius" value="0.4"/></shape>')
+DIRECT = mitsuba('<integrator type="direct"><integer name="emitter_samples" value="2"/>'
+                 '<integer name="bsdf_samples" value="1"/></integrator>'
+                 + SENSOR.format(kind="perspective", extra='<float name="fov" value="45"/>') + ROOM
+                 + '<emitter type="point"><point name="position" value="-1, 1, 1"/><rgb name="intensity" value="1"/>'
+                 '</emitter><shape type="sphere"><float name="radius" value="0.4"/><bsdf type="dielectric"/></shape>'
+                 '<emitter type="constant"><rgb name="radiance" value="0.05"/></emitter>')
+
+
+def phase_blends():
+    """Nested blends of Rayleigh, Draine, a table and HG, in a medium furnace."""
+    from volcl.scene.model import Phase
+    inner = Phase("blend", weight=0.6, phases=(Phase("rayleigh"), Phase("tabulated", values=np.array([0.2, 1.0, 3.0]))))
+    outer = Phase("blend", weight=0.3, phases=(Phase("draine", g=0.5, alpha=1.0), inner))
+    fog = medium(1.5, 0.9)
+    fog.phase = outer
+    return furnace(0.5, medium=fog)
+
+
+def every_feature():
+    """The fog scene on the program with every feature compiled in."""
+    return load(SCENES / "fog.xml"), all_features()
+
+
+FAMILIES = {
+    "surfaces": shipped("cbox"),               # spheres, diffuse, dielectric, conductor, area lights
+    "shading_normals": shipped("report_nomedium"),
+    "lights": lights,                          # point, directional, constant environment, area
+    "media": shipped("fog"),                   # homogeneous HG medium, medium boundaries
+    "chromatic_media": shipped("underwater"),
+    "null_boundaries": shipped("smoke_sphere"),
+    "camera_in_bounded_medium": shipped("inside_fog"),
+    "emissive_media": emissive_media,
+    "grid_media": shipped("smoke_grid"),
+    "equiangular": shipped("point_in_fog"),
+    "phase_families_mie": shipped("fog_mie"),
+    "phase_families_fournier_forand": shipped("underwater_ff"),
+    "phase_families_blends": phase_blends,
+    "cylinders": CYLINDERS,
+    "thinlens_camera": THINLENS,
+    "orthographic_camera": ORTHOGRAPHIC,
+    "direct_integrator": DIRECT,
+    "envmap": shipped("cloud_sky"),            # envmap lookups and sampling, a grid medium under it
+    "rough_glass_textures": shipped("rough_glass_medium"),   # roughdielectric, checkerboard, envmap
+    "rough_bsdfs_bitmaps_bump_maps": shipped("textured_cbox"),  # roughconductor/plastic, bitmaps, bump and normal maps
+    "every_feature": every_feature,
+}
+
+
+def main(family, size=8, spp=1):
+    made = FAMILIES[family]()
+    sc, features = made if isinstance(made, tuple) else (made, None)
+    sc.camera.width = sc.camera.height = size
+    devices = devmod.list_devices()
+    assert len(devices) == 1, f"expected only the simulated device, found {[d.name for d in devices]}"
+    r = Renderer(sc, device=devices[0], features=features, seed=5)
+    res = r.render(spp)
+    print(f"{family}: {res.device}, {size}x{size}, {spp} spp, invalid {res.invalid}, "
+          f"mean {res.image.mean():.4g}")
+    return 0 if res.invalid == 0 and np.isfinite(res.image).all() else 3
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1]))
