@@ -38,6 +38,7 @@ FLAGS = (
     "BUMP_MAPS",            # bump or normal maps
     "PHASE_FAMILIES",       # phase functions beyond HG: Rayleigh, Draine, Cornette-Shanks, Fournier-Forand,
                             # tabulated, blends, approximate Mie (one flag: volcl/phase.py, README)
+    "INSTANCES",            # shape groups placed by instances: a two-level BVH (kernels/bvh.h)
 )
 
 
@@ -69,6 +70,7 @@ def detect(scene: Scene) -> dict[str, bool]:
     f = dict.fromkeys(FLAGS, False)
     f["SPHERES"] = any(s.kind == "sphere" for s in scene.shapes)
     f["CYLINDERS"] = any(s.kind == "cylinder" for s in scene.shapes)
+    f["INSTANCES"] = bool(getattr(scene, "instances", None))
     f["THINLENS"] = scene.camera.kind == "thinlens"
     f["ORTHOGRAPHIC"] = scene.camera.kind == "orthographic"
     f["DIRECT"] = scene.integrator.kind == "direct"
