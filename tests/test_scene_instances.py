@@ -1,0 +1,77 @@
+"""Mitsuba's shapegroup and instance as the parser reads them (shapes kept once, in the group's
+space; instances with their to_world), the warnings where volcl follows Mitsuba's rules, and an
+identity instance rendering like the same shapes placed directly."""
+import numpy as np
+import pytest
+
+from imagestats import assert_images_match
+from volcl.renderer import Renderer
+from volcl.scene import load_string
+
+GROUP = ('<shape type="shapegroup" id="g">'
+         '<shape type="sphere"><point name="center" x="0.3" y="0" z="0"/><float name="radius" value="0.4"/>'
+         '<bsdf type="diffuse"><rgb name="reflectance" value="0.2, 0.5, 0.8"/></bsdf></shape>'
+         '<shape type="cube"><transform name="to_world"><scale value="0.3"/><translate x="-0.6"/></transform>'
+         '<bsdf type="diffuse"/></shape></shape>')
+
+
+def scene(body):
+    return load_string(f'<scene version="3.0.0">{body}</scene>')
+
+
+def test_group_shapes_are_kept_once_in_group_space():
+    s = scene(GROUP + ''.join(f'<shape type="instance"><ref id="g"/><transform name="to_world">'
+                              f'<scale x="2" y="1" z="0.5"/><translate x="{x}"/></transform></shape>' for x in range(5)))
+    assert len(s.instances) == 5
+    assert len(s.shapes) == 2 and all(sh.group is s.instances[0].group for sh in s.shapes)
+    sphere = next(sh for sh in s.shapes if sh.kind == "sphere")
+    assert np.allclose(sphere.center, [0.3, 0, 0]) and sphere.radius == pytest.approx(0.4)
+    expected = np.diag([2.0, 1.0, 0.5, 1.0])
+    expected[0, 3] = 3.0
+    assert np.allclose(s.instances[3].to_world, expected)
+
+
+def test_unused_group_renders_nothing_and_own_shapes_come_first():
+    s = scene(GROUP + '<shape type="shapegroup" id="unused"><shape type="cube"/></shape>'
+              '<shape type="rectangle"/><shape type="instance"><ref id="g"/></shape>')
+    assert [sh.kind for sh in s.shapes] == ["mesh", "sphere", "mesh"]
+    assert s.shapes[0].group is None and s.shapes[1].group is not None
+
+
+def test_group_to_world_is_ignored_with_a_warning():
+    s = scene('<shape type="shapegroup" id="g"><transform name="to_world"><translate x="5"/></transform>'
+              '<shape type="cube"/></shape><shape type="instance"><ref id="g"/></shape>')
+    assert any("shapegroup's to_world is ignored" in str(w) for w in s.warnings)
+    assert np.allclose(s.shapes[0].vertices.mean(0), 0)
+
+
+def test_nested_group_declared_inline_in_an_instance():
+    s = scene('<shape type="instance"><shape type="shapegroup"><shape type="cube"/></shape></shape>')
+    assert len(s.instances) == 1 and len(s.shapes) == 1
+
+
+def test_scene_without_instances_has_no_instance_feature():
+    from volcl.features import detect
+    assert not detect(scene('<shape type="cube"/>'))["INSTANCES"]
+    assert detect(scene(GROUP + '<shape type="instance"><ref id="g"/></shape>'))["INSTANCES"]
+
+
+SETUP = ('<integrator type="path"><integer name="max_depth" value="3"/></integrator>'
+         '<sensor type="perspective"><float name="fov" value="45"/><transform name="to_world">'
+         '<lookat origin="0, 0.5, 3" target="0, 0, 0" up="0, 1, 0"/></transform>'
+         '<film type="hdrfilm"><integer name="width" value="20"/><integer name="height" value="16"/>'
+         '<rfilter type="box"/></film></sensor>'
+         '<shape type="rectangle"><transform name="to_world"><scale value="0.5"/><rotate x="1" angle="90"/>'
+         '<translate y="1.5"/></transform><emitter type="area"><rgb name="radiance" value="6"/></emitter></shape>'
+         '<shape type="rectangle"><transform name="to_world"><scale value="3"/><rotate x="1" angle="-90"/>'
+         '<translate y="-0.5"/></transform><bsdf type="diffuse"/></shape>')
+
+
+def test_identity_instance_renders_like_the_flat_shapes(device):
+    flat_body = GROUP.replace('<shape type="shapegroup" id="g">', '')[:-len('</shape>')]
+    flat = scene(SETUP + flat_body)
+    inst = scene(SETUP + GROUP + '<shape type="instance"><ref id="g"/></shape>')
+    assert not flat.instances and len(inst.instances) == 1
+    a = Renderer(flat, device=device, seed=1).render(128)
+    b = Renderer(inst, device=device, seed=2).render(128)
+    assert_images_match(a, b, what="identity instance vs flat shapes")
