@@ -75,3 +75,22 @@ def test_identity_instance_renders_like_the_flat_shapes(device):
     a = Renderer(flat, device=device, seed=1).render(128)
     b = Renderer(inst, device=device, seed=2).render(128)
     assert_images_match(a, b, what="identity instance vs flat shapes")
+
+
+def test_geometry_is_stored_once_however_many_instances():
+    """What the pre-upload memory check sums (the packed buffers): the group's triangles once; each
+    further instance adds its record and a top-level leaf slot, not a copy of the mesh."""
+    from volcl import layout
+    from volcl.pack import Packer
+
+    def packed(n):
+        body = ('<shape type="shapegroup" id="g"><shape type="cube"/><shape type="sphere"/></shape>'
+                + ''.join(f'<shape type="instance"><ref id="g"/><transform name="to_world"><translate x="{3 * k}"/>'
+                          f'</transform></shape>' for k in range(n)))
+        return Packer(scene(body)).pack()
+    one, many = packed(1), packed(64)
+    assert len(many.arrays["triangles"]) == len(one.arrays["triangles"]) == 12
+    assert len(many.arrays["spheres"]) == 1 and len(many.arrays["instances"]) == 64
+    grown = sum(a.nbytes for a in many.arrays.values()) - sum(a.nbytes for a in one.arrays.values())
+    per_instance = layout.INSTANCE.itemsize + layout.LEAF_PACKET.itemsize + layout.BVH_WIDE_NODE.itemsize
+    assert grown <= 63 * per_instance, grown
