@@ -94,3 +94,27 @@ def test_geometry_is_stored_once_however_many_instances():
     grown = sum(a.nbytes for a in many.arrays.values()) - sum(a.nbytes for a in one.arrays.values())
     per_instance = layout.INSTANCE.itemsize + layout.LEAF_PACKET.itemsize + layout.BVH_WIDE_NODE.itemsize
     assert grown <= 63 * per_instance, grown
+
+
+def test_editing_an_instance_to_world_renders_what_loading_it_renders(device):
+    """volcl.traverse: "<instance id>.to_world" moves one placement (bit for bit the image of the
+    file that places it there); a singular matrix is refused."""
+    import volcl
+    placed = '<shape type="instance" id="second"><ref id="g"/><transform name="to_world">{}</transform></shape>'
+    text = (SETUP.replace('value="20"', 'value="12"').replace('value="16"', 'value="10"') + GROUP
+            + '<shape type="instance"><ref id="g"/><transform name="to_world"><translate x="-0.8"/></transform></shape>')
+    edited = volcl.load_string('<scene version="3.0.0">' + text + placed.format('<translate x="0.8"/>') + '</scene>')
+    before = volcl.render(edited, spp=4, seed=3, device=device)
+    params = volcl.traverse(edited)
+    assert "second.to_world" in params and "instance_0.to_world" in params
+    m = np.diag([1.5, 0.6, 1.0, 1.0])
+    m[:3, 3] = [0.7, 0.1, -0.2]
+    params["second.to_world"] = m
+    params.update()
+    loaded = volcl.load_string('<scene version="3.0.0">' + text + placed.format(
+        '<scale x="1.5" y="0.6" z="1"/><translate x="0.7" y="0.1" z="-0.2"/>') + '</scene>')
+    a = volcl.render(edited, spp=4, seed=3, device=device)
+    b = volcl.render(loaded, spp=4, seed=3, device=device)
+    assert np.array_equal(a.image, b.image) and not np.array_equal(a.image, before.image)
+    with pytest.raises(volcl.VolclError, match="singular"):
+        params["second.to_world"] = np.diag([1.0, 0.0, 1.0, 1.0])
