@@ -305,6 +305,17 @@ def _cases():
         '</texture></bsdf></shape></shape>'
         '<shape type="instance"><ref id="ball"/><transform name="to_world"><scale x="1.6" y="0.6" z="1"/>'
         '<rotate z="1" angle="25"/><translate y="-0.2"/></transform></shape>'))
+    # a mirroring instance keeps the group's normals (Mitsuba's inverse transpose); the same mirror
+    # as a rectangle's own to_world turns it to face away (one-sided diffuse: black from the front)
+    panel = ('<shape type="rectangle"><transform name="to_world"><scale value="0.45"/>{}</transform>'
+             '<bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.6, 0.3"/></bsdf></shape>')
+    s["instanced_mirror"] = scene_xml(PATH.format(depth=3) + sensor() + LIGHT.format(radiance=8) + FLOOR
+                                      + '<shape type="shapegroup" id="p">' + panel.format("") + '</shape>'
+                                      '<shape type="instance"><ref id="p"/><transform name="to_world">'
+                                      '<scale x="-1" y="1" z="1"/><rotate x="1" angle="-20"/><translate x="-0.6"/>'
+                                      '</transform></shape>'
+                                      + panel.format('<scale x="-1" y="1" z="1"/><rotate x="1" angle="-20"/>'
+                                                     '<translate x="0.6"/>'))
     spp = {"blackbody": 256}
     return {name: (text, spp.get(name, 512), 256, "llvm_ad_spectral" if name == "blackbody" else VARIANT)
             for name, text in s.items()}

@@ -118,3 +118,38 @@ def test_editing_an_instance_to_world_renders_what_loading_it_renders(device):
     assert np.array_equal(a.image, b.image) and not np.array_equal(a.image, before.image)
     with pytest.raises(volcl.VolclError, match="singular"):
         params["second.to_world"] = np.diag([1.0, 0.0, 1.0, 1.0])
+
+
+def test_instanced_medium_box_renders_like_the_flat_box(device):
+    """A closed mesh holding a medium, instanced under a non-uniform scale and a mirror, renders like
+    the same mesh placed by the same to_world directly: medium transitions follow the instance's
+    normals (volpath, so the medium counts)."""
+    box = ('<shape type="cube"><bsdf type="null"/><medium type="homogeneous" name="interior">'
+           '<rgb name="sigma_t" value="1.5, 2.5, 4"/><rgb name="albedo" value="0.8"/></medium></shape>')
+    m = '<transform name="to_world"><scale x="0.6" y="0.35" z="0.4"/><rotate y="1" angle="30"/></transform>'
+    setup = SETUP.replace('type="path"', 'type="volpath"')
+    flat = scene(setup + box.replace('<shape type="cube">', '<shape type="cube">' + m))
+    inst = scene(setup + '<shape type="shapegroup" id="g">' + box + '</shape>'
+                 f'<shape type="instance"><ref id="g"/>{m}</shape>')
+    assert len(inst.instances) == 1 and not flat.instances
+    a = Renderer(flat, device=device, seed=1).render(256)
+    b = Renderer(inst, device=device, seed=2).render(256)
+    assert_images_match(a, b, what="instanced medium box vs flat box")
+
+
+def test_mirroring_instance_keeps_outward_normals(device):
+    """Under a mirroring to_world Mitsuba's instance keeps the group's outward normals (the inverse
+    transpose), whereas a mesh mirrored by its own to_world turns inside out (its winding is
+    mirrored): the instance renders like the mirrored mesh with flip_normals, and warns."""
+    box = ('<shape type="cube"><bsdf type="null"/><medium type="homogeneous" name="interior">'
+           '<rgb name="sigma_t" value="1.5, 2.5, 4"/><rgb name="albedo" value="0.8"/></medium></shape>')
+    m = '<transform name="to_world"><scale x="-0.6" y="0.35" z="0.4"/><rotate y="1" angle="30"/></transform>'
+    setup = SETUP.replace('type="path"', 'type="volpath"')
+    flipped = scene(setup + box.replace('<shape type="cube">', '<shape type="cube"><boolean name="flip_normals" '
+                                        'value="true"/>' + m))
+    inst = scene(setup + '<shape type="shapegroup" id="g">' + box + '</shape>'
+                 f'<shape type="instance"><ref id="g"/>{m}</shape>')
+    assert any("mirrors" in str(w) for w in inst.warnings)
+    a = Renderer(flipped, device=device, seed=1).render(256)
+    b = Renderer(inst, device=device, seed=2).render(256)
+    assert_images_match(a, b, what="mirroring instance vs flipped mirrored box")

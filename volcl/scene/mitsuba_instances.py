@@ -72,6 +72,10 @@ def build_instance(node: Node) -> Instance:
     if not np.isfinite(to_world).all() or abs(np.linalg.det(to_world[:3, :3])) < 1e-30:
         raise node.fail("to_world", "the instance's to_world is singular (it flattens the group); rays cannot "
                                     "be taken into the group's space: give it a scale that is not zero")
+    if np.linalg.det(to_world[:3, :3]) < 0:
+        node.ctx.warn(node.at("to_world"), "the instance's to_world mirrors: as in Mitsuba 3, the group's shapes "
+                                           "keep their outward normals (the inverse transpose), unlike a shape "
+                                           "mirrored by its own to_world, which turns inside out")
     return Instance(groups[0].obj, to_world, id=node.element.attrs.get("id", ""), source=node.source())
 
 
