@@ -36,6 +36,7 @@ def instanced_scene(tmp_path, rng, n_inst=12):
     mesh.vertices += rng.normal(0, 0.02, mesh.vertices.shape)
     mesh.export(tmp_path / "blob.ply")
     instances = [random_affine(rng) for _ in range(n_inst)]
+    instances[0][:3, 0] *= -1       # a mirror: normals stay the inverse transpose's (Mitsuba's rule)
     inst_xml = "\n".join(f"<shape type=\"instance\"><ref id=\"g\"/>{matrix_xml(m)}</shape>" for m in instances)
     xml = f"""<scene version="3.0.0">
       <shape type="shapegroup" id="g">
