@@ -153,3 +153,19 @@ def test_mirroring_instance_keeps_outward_normals(device):
     a = Renderer(flipped, device=device, seed=1).render(256)
     b = Renderer(inst, device=device, seed=2).render(256)
     assert_images_match(a, b, what="mirroring instance vs flipped mirrored box")
+
+
+def test_mirrored_rectangle_keeps_its_normal_as_in_mitsuba():
+    """Mitsuba's rectangle and disk are analytic, their normal to_world's inverse transpose of +z: a
+    mirroring to_world (scale x=-1) leaves a rectangle facing +z, where a mirrored mesh (cube)
+    turns inside out."""
+    def normal(s):
+        v = s.vertices[s.faces[0]]
+        n = np.cross(v[1] - v[0], v[2] - v[0])
+        return n / np.linalg.norm(n)
+    mirror = '<transform name="to_world"><scale x="-1" y="1" z="1"/></transform>'
+    for kind in ("rectangle", "disk"):
+        flat = scene(f'<shape type="{kind}">{mirror}</shape>').shapes[0]
+        assert normal(flat)[2] > 0.99, kind
+        flipped = scene(f'<shape type="{kind}"><boolean name="flip_normals" value="true"/>{mirror}</shape>').shapes[0]
+        assert normal(flipped)[2] < -0.99, kind

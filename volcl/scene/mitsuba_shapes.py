@@ -61,7 +61,7 @@ def build_shape(node: Node):
         shape = mesh_shape(mesh, to_world, bsdf=bsdf, source=node.source(), where=node.at("to_world"),
                            face_normals=node.bool("face_normals", False), flip_normals=flip,
                            smooth_normals=mesh.normals is None and node.type not in PRIMITIVES,
-                           normal_matrix=normal_matrix)
+                           normal_matrix=normal_matrix, normal_by_transform=node.type in ("rectangle", "disk"))
     if node.type == "disk":
         shape.uv_map = "disk"
     _attach_emitter_and_media(node, shape, emitter)

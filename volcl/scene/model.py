@@ -203,6 +203,9 @@ class Shape:
     emitter_id: str = ""             # the area emitter's own id, if it has one
     uv_map: str = ""                 # 'disk': a disk mesh with Mitsuba's analytic disk uvs (u = r, v = phi / 2 pi)
     group: Optional["ShapeGroup"] = None      # the shapegroup this shape belongs to, if any
+    # Mitsuba's rectangle and disk are analytic: their normal is to_world's inverse transpose of +z,
+    # so a mirroring to_world does not turn them around as it turns a mesh's winding
+    normal_by_transform: bool = False
 
 
 @dataclass
