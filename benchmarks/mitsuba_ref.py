@@ -129,7 +129,8 @@ def render_mitsuba(scene: str, out: str | None, python: str, variant: str = DEFA
         raise MitsubaError(f"Mitsuba render of {scene} timed out after {timeout} s") from None
     except OSError as exc:
         raise MitsubaError(f"cannot run {python}: {exc}") from None
-    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith(RESULT_TAG)]
+    # a Mitsuba warning ends with a colour reset and no newline, so the tag may start mid-line
+    lines = [ln[ln.index(RESULT_TAG):] for ln in proc.stdout.splitlines() if RESULT_TAG in ln]
     if proc.returncode != 0 or not lines:
         tail = "\n".join((proc.stderr.strip() or proc.stdout.strip()).splitlines()[-15:])
         raise MitsubaError(f"Mitsuba failed on {scene} (exit {proc.returncode}):\n{tail}")
