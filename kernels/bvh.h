@@ -51,6 +51,9 @@ typedef struct {
     float t;
     int prim;       /* primitive code (LeafPacket.prim): >= 0 triangle, < 0 analytic (sphere or cylinder, cylinder.h) */
     float b1, b2;   /* barycentrics of p1 and p2 on triangles */
+#if VOLCL_HAS_INSTANCES
+    int inst;       /* the instance whose shape group holds prim (prim in the group's space), or -1 */
+#endif
 } Hit;
 
 /* Per-ray constants of the watertight test: the axis permutation (kz = the direction's largest
@@ -146,6 +149,9 @@ inline int packet_triangles_intersect(__global const LeafPacket *pk, const Shear
     hit->prim = pk->prim[best];
     hit->b1 = b1[best];
     hit->b2 = b2[best];
+#if VOLCL_HAS_INSTANCES
+    hit->inst = -1;
+#endif
     return stop ? stop : 1;
 }
 
@@ -173,6 +179,15 @@ inline bool sphere_intersect(__global const Sphere *sp, float3 o, float3 d, floa
     return true;
 }
 
+/* Nearest hit in (eps, tmax) on analytic primitive a (a sphere, or a cylinder from
+ * VOLCL_CYLINDER_CODE_BASE, cylinder.h). */
+inline bool analytic_intersect(const SceneData *sc, int a, float3 o, float3 d, float tmax, float *t) {
+#if VOLCL_HAS_CYLINDERS
+    if (analytic_is_cylinder(a)) return cylinder_intersect(&sc->cylinders[a - VOLCL_CYLINDER_CODE_BASE], o, d, tmax, t);
+#endif
+    return sphere_intersect(&sc->spheres[a], o, d, tmax, t);
+}
+
 /* The analytic primitives of a packet (codes < 0: spheres and cylinders, cylinder.h), one by one
  * after its triangles; returns as packet_triangles_intersect does. */
 inline int packet_analytic_intersect(const SceneData *sc, __global const LeafPacket *pk, float3 o, float3 d,
@@ -182,19 +197,14 @@ inline int packet_analytic_intersect(const SceneData *sc, __global const LeafPac
     for (int i = 0; i < VOLCL_LEAF_WIDTH; ++i) {
         int code = pk->prim[i];
         if (code >= 0) continue;
-        int a = -code - 1;
         float t;
-        bool h;
-#if VOLCL_HAS_CYLINDERS
-        if (analytic_is_cylinder(a))
-            h = cylinder_intersect(&sc->cylinders[a - VOLCL_CYLINDER_CODE_BASE], o, d, hit->t, &t);
-        else
-#endif
-            h = sphere_intersect(&sc->spheres[a], o, d, hit->t, &t);
-        if (h) {
+        if (analytic_intersect(sc, -code - 1, o, d, hit->t, &t)) {
             hit->t = t;
             hit->prim = code;
             hit->b1 = hit->b2 = 0.0f;
+#if VOLCL_HAS_INSTANCES
+            hit->inst = -1;
+#endif
             if (mode == TRACE_ANY || (mode == TRACE_SHADOW && pk->opaque[i])) return 2;
             found = 1;
         }
@@ -264,82 +274,82 @@ inline int lane_mask(intW m) {
 /* Index of the lowest set bit of a non-zero mask (OpenCL C 1.2 has clz but not ctz). */
 inline int lowest_lane(int mask) { return 31 - clz(mask & -mask); }
 
-/* A query (TRACE_*) for hits in (0, tmax); true when something is hit, with *hit as the mode says.
- *
- * The traversal keeps a stack of (child, entry distance). At a node every child box the ray enters
- * goes on the stack; for closest hits they are inserted in order of entry distance, nearest on top,
- * so the nearest is visited next and a hit found there culls the others when they come off the
- * stack (an entry distance beyond the hit, with the box test's tolerance). Occlusion tests
- * (TRACE_ANY) skip the ordering; the shadow query keeps it, for the nearest null surface. The builder bounds the stack depth any ray can reach by VOLCL_BVH_STACK
- * (volcl/bvh_wide.py). An empty scene is one node without children, which no ray enters. */
-inline bool bvh_trace(const SceneData *sc, float3 o, float3 d, float tmax, int mode, Hit *hit) {
-    Shear sh = shear_make(o, d);
-    /* a zero direction component becomes a tiny one of the same sign: its slab then spans
-     * +-1e30 instead of producing 0 * INF = NaN for an origin on the slab plane */
-    float3 inv_d = 1.0f / select(d, copysign((float3)(1e-30f), d), fabs(d) < (float3)(1e-30f));
-    BoxRay br = box_ray_make(o, inv_d);
-    int stack[VOLCL_BVH_STACK];
-    float stack_t[VOLCL_BVH_STACK];
-    int top = 0;
-    int ref = 0;            /* the node or leaf visited now: the root first */
-    bool found = false;
-    hit->t = tmax;
-    hit->prim = 0;
-    hit->b1 = hit->b2 = 0.0f;
-    for (;;) {
-        if (ref >= 0) {
-            __global const BvhWideNode *n = &sc->nodes[ref];
-            floatW entry = node_children_entry(n, &br, hit->t);
-            int mask = lane_mask(entry < (floatW)(VOLCL_INF));
-            if (mask != 0) {
-                int i = lowest_lane(mask);
-                mask &= mask - 1;
-                if (mask == 0) {        /* one child entered: visit it without the stack */
-                    ref = n->child[i];
-                    continue;
-                }
-                float enter[VOLCL_BVH_WIDTH];
-                vstoreW(entry, 0, enter);
-                /* every entered child on the stack; for closest hits each goes into this node's run
-                 * of the stack in order of entry distance, farthest at the bottom */
-                int base = top;
-                for (;;) {
-                    float t = enter[i];
-                    int j = top++;
-                    if (mode != TRACE_ANY) {
-                        for (; j > base && stack_t[j - 1] < t; --j) {
-                            stack[j] = stack[j - 1];
-                            stack_t[j] = stack_t[j - 1];
-                        }
-                    }
-                    stack[j] = n->child[i];
-                    stack_t[j] = t;
-                    if (mask == 0) break;
-                    i = lowest_lane(mask);
-                    mask &= mask - 1;
-                }
-                ref = stack[--top];     /* the nearest, which just passed the box test */
-                continue;
-            }
-        } else {
-            int leaf = ~ref;
-            int first = leaf >> 4, end = first + (leaf & 15) + 1;
-            for (int i = first; i < end; ++i) {
-                __global const LeafPacket *pk = &sc->leaves[i];
-                int h = packet_triangles_intersect(pk, &sh, hit->t, mode, hit);
-                if (h == 2) return true;
-                int ha = packet_analytic_intersect(sc, pk, o, d, mode, hit);
-                if (ha == 2) return true;
-                found |= (h | ha) != 0;
-            }
+#if !VOLCL_HAS_INSTANCES
+#define VOLCL_TRAVERSE_NAME bvh_traverse_scene
+#define VOLCL_TRAVERSE_LEAF packet_analytic_intersect
+#include "bvh_traverse.h"
+#else
+/* Instances (Mitsuba's instance of a shapegroup). The top-level tree's leaves hold the scene's own
+ * primitives and instances (analytic index VOLCL_INSTANCE_CODE_BASE + k); entering one takes the ray
+ * into the group's space by the instance's affine world-to-object map and traverses the group's own
+ * tree there, so each group's geometry is stored once however often it is placed. The group-space
+ * direction is normalized (the sphere and cylinder tests expect a unit direction), and distances
+ * scale by its length: a group-space distance t' is the world distance t' / |M^-1 d| along the
+ * same ray, so hit->t stays the world-space distance every query compares against. */
+#define VOLCL_INSTANCE_CODE_BASE (1 << 29)
+
+#define VOLCL_TRAVERSE_NAME bvh_traverse_group
+#define VOLCL_TRAVERSE_LEAF packet_analytic_intersect
+#include "bvh_traverse.h"
+
+inline int instance_intersect(const SceneData *sc, int k, float3 o, float3 d, int mode, Hit *hit) {
+    __global const Instance *in = &sc->instances[k];
+    float3 lo = affine_point(in->to_object, o), ld = affine_vector(in->to_object, d);
+    float len = length(ld);
+    if (!(len > 0.0f && len < VOLCL_INF)) return 0;
+    Hit h;
+    int r = bvh_traverse_group(sc, in->root, lo, ld / len, hit->t * len, mode, &h);
+    if (r == 0 || mode == TRACE_ANY) return r;
+    hit->t = h.t / len;
+    hit->prim = h.prim;
+    hit->b1 = h.b1;
+    hit->b2 = h.b2;
+    hit->inst = k;
+    return r;
+}
+
+/* A top-level packet's analytic lanes: instances, and the scene's own spheres and cylinders. */
+inline int packet_top_intersect(const SceneData *sc, __global const LeafPacket *pk, float3 o, float3 d,
+                                int mode, Hit *hit) {
+    int found = 0;
+    for (int i = 0; i < VOLCL_LEAF_WIDTH; ++i) {
+        int code = pk->prim[i];
+        if (code >= 0) continue;
+        int a = -code - 1;
+        if (a >= VOLCL_INSTANCE_CODE_BASE && !analytic_is_cylinder(a)) {
+            int r = instance_intersect(sc, a - VOLCL_INSTANCE_CODE_BASE, o, d, mode, hit);
+            if (r == 2) return 2;
+            found |= r;
+            continue;
         }
-        /* next from the stack, skipping entries whose box the ray enters beyond the closest hit */
-        do {
-            if (top == 0) return found;
-            --top;
-        } while (stack_t[top] > hit->t * 1.0000004f);
-        ref = stack[top];
+#if VOLCL_HAS_SPHERES || VOLCL_HAS_CYLINDERS
+        float t;
+        if (analytic_intersect(sc, a, o, d, hit->t, &t)) {
+            hit->t = t;
+            hit->prim = code;
+            hit->b1 = hit->b2 = 0.0f;
+            hit->inst = -1;
+            if (mode == TRACE_ANY || (mode == TRACE_SHADOW && pk->opaque[i])) return 2;
+            found = 1;
+        }
+#endif
     }
+    return found;
+}
+
+#define VOLCL_TRAVERSE_NAME bvh_traverse_top
+#define VOLCL_TRAVERSE_LEAF packet_top_intersect
+#include "bvh_traverse.h"
+#endif
+
+/* A query (TRACE_*) for hits in (0, tmax); true when something is hit, with *hit as the mode says
+ * (bvh_traverse.h; with INSTANCES, hit->inst names the instance whose group was hit, or -1). */
+inline bool bvh_trace(const SceneData *sc, float3 o, float3 d, float tmax, int mode, Hit *hit) {
+#if VOLCL_HAS_INSTANCES
+    return bvh_traverse_top(sc, 0, o, d, tmax, mode, hit) != 0;
+#else
+    return bvh_traverse_scene(sc, 0, o, d, tmax, mode, hit) != 0;
+#endif
 }
 
 #endif

@@ -41,6 +41,7 @@ VOLCL_KERNEL void render_pass(__global const BvhWideNode *nodes, __global const 
                           __global const UvMap *uv_maps, __global const Texture *textures,
                           __global const float *texels, __global const float *bsdf_tables,
                           __global const PhaseLobe *phase_lobes, __global const float *phase_tables,
+                          __global const Instance *instances,
                           __global float4 *sums, __global float4 *sums_sq, __global uint *invalid,
                           __global uint *cutoffs,
                           uint sample_base, int tile_x, int tile_y, int tile_w, int tile_pixels,
@@ -53,7 +54,7 @@ VOLCL_KERNEL void render_pass(__global const BvhWideNode *nodes, __global const 
     int pixel = py * params->width + px;
     SceneData sc = {nodes, leaves, triangles, normals, spheres, cylinders, shapes, bsdfs, lights,
                     light_tri_cdf, light_tris, env_data, media, grids, grid_data, params, tri_uvs, uv_maps,
-                    textures, texels, bsdf_tables, phase_lobes, phase_tables};
+                    textures, texels, bsdf_tables, phase_lobes, phase_tables, instances};
     Rng rng = rng_init(params->seed, (uint)pixel, sample_base + (uint)slot);
     float3 o, d;
     float t_max;

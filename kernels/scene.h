@@ -26,6 +26,7 @@ typedef struct {
     __global const float *bsdf_tables;      /* roughplastic transmittance tables */
     __global const PhaseLobe *phase_lobes;  /* lobes of the mixture phase functions (PHASE_LOBES) */
     __global const float *phase_tables;     /* their piecewise-linear tables, concatenated */
+    __global const Instance *instances;     /* placements of shape groups (bvh.h, INSTANCES) */
 } SceneData;
 
 #endif

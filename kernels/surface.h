@@ -19,10 +19,15 @@ typedef struct {
  * the returned copy with llvm.experimental.noalias.scope.decl, which Oclgrind 21.10 cannot run
  * ("Undefined external function"); unoptimized builds (-cl-opt-disable, no __OPTIMIZE__) leave
  * inlining to the compiler, optimized ones keep forcing it. */
+#if VOLCL_HAS_INSTANCES
+#define VOLCL_SURFACE_POINT surface_point_local     /* a hit in the space its primitive is stored in */
+#else
+#define VOLCL_SURFACE_POINT surface_point
+#endif
 #ifdef __OPTIMIZE__
 __attribute__((always_inline))
 #endif
-inline SurfacePoint surface_point(const SceneData *sc, const Hit *h, float3 o, float3 d) {
+inline SurfacePoint VOLCL_SURFACE_POINT(const SceneData *sc, const Hit *h, float3 o, float3 d) {
     SurfacePoint s;
 #if VOLCL_HAS_CYLINDERS
     if (h->prim < 0 && analytic_is_cylinder(-h->prim - 1)) {
@@ -82,5 +87,46 @@ inline SurfacePoint surface_point(const SceneData *sc, const Hit *h, float3 o, f
     s.mag = max_component(fmax(fabs(p0), fmax(fabs(p1), fabs(p2))));
     return s;
 }
+
+#if VOLCL_HAS_INSTANCES
+/* A group-space normal to the world: by the inverse transpose of the instance's to_world, i.e. the
+ * transpose of its to_object (Mitsuba's Instance: normalize(to_world * Normal3f), which ignores the
+ * sign of the map's determinant). */
+inline float3 instance_normal_to_world(__global const Instance *in, float3 n) {
+    __global const float *m = in->to_object;
+    return normalize((float3)(m[0] * n.x + m[4] * n.y + m[8] * n.z,
+                              m[1] * n.x + m[5] * n.y + m[9] * n.z,
+                              m[2] * n.x + m[6] * n.y + m[10] * n.z));
+}
+
+/* A world normal back to the group's space: by the transpose of to_world. */
+inline float3 instance_normal_to_object(__global const Instance *in, float3 n) {
+    __global const float *m = in->to_world;
+    return normalize((float3)(m[0] * n.x + m[4] * n.y + m[8] * n.z,
+                              m[1] * n.x + m[5] * n.y + m[9] * n.z,
+                              m[2] * n.x + m[6] * n.y + m[10] * n.z));
+}
+
+/* The world point of a hit: the group-space point (computed from the ray taken into the group's
+ * space, whose parameter is the world one) mapped back, its normals by the inverse transpose. */
+#ifdef __OPTIMIZE__
+__attribute__((always_inline))
+#endif
+inline SurfacePoint surface_point(const SceneData *sc, const Hit *h, float3 o, float3 d) {
+    if (h->inst < 0) return surface_point_local(sc, h, o, d);
+    __global const Instance *in = &sc->instances[h->inst];
+    SurfacePoint s = surface_point_local(sc, h, affine_point(in->to_object, o), affine_vector(in->to_object, d));
+    s.p = affine_point(in->to_world, s.p);
+    s.ng = instance_normal_to_world(in, s.ng);
+    s.ns = instance_normal_to_world(in, s.ns);
+    /* the world coordinates' magnitude: the translation plus the linear part's row sums times the
+     * group-space magnitude (offset_origin scales its offset by it) */
+    __global const float *m = in->to_world;
+    float3 rows = fabs((float3)(m[0], m[4], m[8])) + fabs((float3)(m[1], m[5], m[9]))
+                + fabs((float3)(m[2], m[6], m[10]));
+    s.mag = max_component(fabs((float3)(m[3], m[7], m[11])) + rows * s.mag);
+    return s;
+}
+#endif
 
 #endif

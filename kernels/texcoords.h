@@ -16,6 +16,12 @@
                         || VOLCL_HAS_ROUGHDIELECTRIC)
 
 #if VOLCL_NEEDS_UV
+#if VOLCL_HAS_INSTANCES
+#define VOLCL_SURFACE_TEXCOORDS surface_texcoords_local
+#else
+#define VOLCL_SURFACE_TEXCOORDS surface_texcoords
+#endif
+
 inline float phi_of(float x, float y) {
     float phi = atan2(y, x);
     return phi < 0.0f ? phi + 2.0f * VOLCL_PI : phi;
@@ -66,7 +72,7 @@ inline void texcoords_analytic(__global const UvMap *m, SurfacePoint *s) {
 }
 
 /* Fill s->uv, s->dpdu and s->dpdv for the hit h that surface_point made s from. */
-inline void surface_texcoords(const SceneData *sc, const Hit *h, SurfacePoint *s) {
+inline void VOLCL_SURFACE_TEXCOORDS(const SceneData *sc, const Hit *h, SurfacePoint *s) {
 #if VOLCL_HAS_CYLINDERS
     if (h->prim < 0 && analytic_is_cylinder(-h->prim - 1)) {
         __global const Cylinder *c = &sc->cylinders[-h->prim - 1 - VOLCL_CYLINDER_CODE_BASE];
@@ -89,6 +95,25 @@ inline void surface_texcoords(const SceneData *sc, const Hit *h, SurfacePoint *s
     s->uv = (float2)(0.0f);
     make_frame(s->ng, &s->dpdu, &s->dpdv);
 }
+
+#if VOLCL_HAS_INSTANCES
+/* On an instance, Mitsuba's: the group shape's uv, and its dp/du, dp/dv mapped by to_world. */
+inline void surface_texcoords(const SceneData *sc, const Hit *h, SurfacePoint *s) {
+    if (h->inst < 0) {
+        surface_texcoords_local(sc, h, s);
+        return;
+    }
+    __global const Instance *in = &sc->instances[h->inst];
+    SurfacePoint l = *s;
+    l.p = affine_point(in->to_object, s->p);
+    l.ng = instance_normal_to_object(in, s->ng);
+    l.ns = instance_normal_to_object(in, s->ns);
+    surface_texcoords_local(sc, h, &l);
+    s->uv = l.uv;
+    s->dpdu = affine_vector(in->to_world, l.dpdu);
+    s->dpdv = affine_vector(in->to_world, l.dpdv);
+}
+#endif
 #endif
 
 #endif

@@ -87,6 +87,15 @@ typedef struct {
     int pad0[2];
 } Cylinder;
 
+/* An instance of a shape group (Mitsuba's instance, bvh.h): the group's own tree, from wide node
+ * `root`, placed in the world by an affine map. */
+typedef struct {
+    float to_world[12];     /* row-major 3x4 */
+    float to_object[12];    /* its inverse */
+    int root;
+    int pad0[3];
+} Instance;
+
 /* A shape's surface and media: what a hit on one of its primitives means. */
 typedef struct {
     int bsdf;

@@ -97,6 +97,20 @@ DIRECT = mitsuba('<integrator type="direct"><integer name="emitter_samples" valu
                  '</emitter><shape type="sphere"><float name="radius" value="0.4"/><bsdf type="dielectric"/></shape>'
                  '<emitter type="constant"><rgb name="radiance" value="0.05"/></emitter>')
 
+# a shape group (a mesh with a null-bsdf sphere and a checkerboard, for uvs through the instance) placed
+# twice, once under a non-uniform scale and a shear, next to a shape of the scene's own
+INSTANCES = mitsuba(SENSOR.format(kind="perspective", extra='<float name="fov" value="45"/>') + ROOM + """
+<shape type="shapegroup" id="g">
+    <shape type="cube"><transform name="to_world"><scale value="0.3"/></transform>
+        <bsdf type="diffuse"><texture type="checkerboard" name="reflectance"/></bsdf></shape>
+    <shape type="sphere"><point name="center" value="0.5, 0, 0"/><float name="radius" value="0.3"/>
+        <bsdf type="null"/></shape>
+</shape>
+<shape type="instance"><ref id="g"/><transform name="to_world"><translate x="-0.6"/></transform></shape>
+<shape type="instance"><ref id="g"/><transform name="to_world">
+    <matrix value="1.5 0.3 0 0.5  0 0.6 0 0  0 0 1 0.2  0 0 0 1"/></transform></shape>
+<shape type="sphere"><point name="center" value="0, 0.6, 0"/><float name="radius" value="0.2"/></shape>""")
+
 
 def phase_blends():
     """Nested blends of Rayleigh, Draine, a table and HG, in a medium furnace."""
@@ -129,6 +143,7 @@ FAMILIES = {
     "phase_families_fournier_forand": shipped("underwater_ff"),
     "phase_families_blends": phase_blends,
     "cylinders": CYLINDERS,
+    "instances": INSTANCES,                    # shapegroup + instance: the two-level BVH
     "thinlens_camera": THINLENS,
     "orthographic_camera": ORTHOGRAPHIC,
     "direct_integrator": DIRECT,

@@ -309,6 +309,37 @@ def _cases():
                                    + spot.format(i="30", c=35, b=25, o="0.3, 1.5, 0.5", t="-0.1, -1, 0")
                                    .replace("</emitter>", slide))
     s["spot_textured_in_fog"] = s["spot_in_fog"].replace("</emitter>", slide, 1)
+    # instancing: one group placed three times (a rotation with a non-uniform scale, a shear); the
+    # sphere of the second scene becomes an ellipsoid, its checkerboard uvs and normals follow
+    group = ('<shape type="shapegroup" id="g"><shape type="obj"><string name="filename" '
+             'value="coarse_sphere_normals.obj"/><transform name="to_world"><scale value="0.4"/></transform>'
+             '<bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.3, 0.2"/></bsdf></shape>'
+             '<shape type="cube"><transform name="to_world"><scale value="0.15"/><translate x="0.45"/></transform>'
+             '<bsdf type="diffuse"><rgb name="reflectance" value="0.2, 0.6, 0.8"/></bsdf></shape></shape>')
+    places = ('<translate x="-1.1" y="-0.4"/>',
+              '<scale x="1.5" y="0.7" z="1"/><rotate y="1" angle="60"/><translate x="0.9" y="-0.3"/>',
+              '<matrix value="1 0.4 0 0  0 1 0.3 0.6  0 0 1 -0.5  0 0 0 1"/>')
+    s["instanced_meshes"] = scene_xml(PATH.format(depth=3) + sensor() + LIGHT.format(radiance=8) + FLOOR + group
+                                      + "".join(f'<shape type="instance"><ref id="g"/><transform name="to_world">'
+                                                f'{p}</transform></shape>' for p in places))
+    s["instanced_ellipsoid"] = scene_xml(PATH.format(depth=3) + sensor() + LIGHT.format(radiance=8) + FLOOR + (
+        '<shape type="shapegroup" id="ball"><shape type="sphere"><float name="radius" value="0.5"/>'
+        '<bsdf type="diffuse"><texture type="checkerboard" name="reflectance"><rgb name="color0" value="0.9, 0.8, 0.2"/>'
+        '<rgb name="color1" value="0.1, 0.3, 0.7"/><transform name="to_uv"><scale value="4"/></transform>'
+        '</texture></bsdf></shape></shape>'
+        '<shape type="instance"><ref id="ball"/><transform name="to_world"><scale x="1.6" y="0.6" z="1"/>'
+        '<rotate z="1" angle="25"/><translate y="-0.2"/></transform></shape>'))
+    # a mirroring instance keeps the group's normals (Mitsuba's inverse transpose); the same mirror
+    # as a rectangle's own to_world turns it to face away (one-sided diffuse: black from the front)
+    panel = ('<shape type="rectangle"><transform name="to_world"><scale value="0.45"/>{}</transform>'
+             '<bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.6, 0.3"/></bsdf></shape>')
+    s["instanced_mirror"] = scene_xml(PATH.format(depth=3) + sensor() + LIGHT.format(radiance=8) + FLOOR
+                                      + '<shape type="shapegroup" id="p">' + panel.format("") + '</shape>'
+                                      '<shape type="instance"><ref id="p"/><transform name="to_world">'
+                                      '<scale x="-1" y="1" z="1"/><rotate x="1" angle="-20"/><translate x="-0.6"/>'
+                                      '</transform></shape>'
+                                      + panel.format('<scale x="-1" y="1" z="1"/><rotate x="1" angle="-20"/>'
+                                                     '<translate x="0.6"/>'))
     spp = {"blackbody": 256}
     return {name: (text, spp.get(name, 512), 256, "llvm_ad_spectral" if name == "blackbody" else VARIANT)
             for name, text in s.items()}

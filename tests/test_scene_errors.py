@@ -90,9 +90,23 @@ MITSUBA_CASES = {
                               "directly inside"),
     "missing path folder": ('<path value="nowhere"/>', 2, "'nowhere'", "not found"),
     "missing include": ('<include filename="nowhere.xml"/>', 2, "'nowhere.xml'", "not found"),
-    "shapegroup": ('<shape type="shapegroup" id="g"><shape type="cube"/></shape>', 2,
-                   "instancing", "not supported yet"),
-    "instance": ('<shape type="instance"><ref id="g"/></shape>', 2, "unknown id 'g'"),
+    "instance of an unknown group": ('<shape type="instance"><ref id="g"/></shape>', 2, "unknown id 'g'"),
+    "nested shapegroup": ('<shape type="shapegroup" id="g">\n<shape type="shapegroup" id="h"><shape type="cube"/>'
+                          '</shape></shape>', 3, "Nested ShapeGroup", "outer group"),
+    "instance inside a shapegroup": ('<shape type="shapegroup" id="g"><shape type="cube"/></shape><shape type="shapegroup" id="h">\n<shape type="instance">'
+                                     '<ref id="g"/></shape></shape>', 3, "Nested instancing"),
+    "emitter inside a shapegroup": ('<shape type="shapegroup" id="g">\n<shape type="cube"><emitter type="area"/>'
+                                    '</shape></shape>', 3, "Instancing of emitters", "directly in the scene"),
+    "bsdf directly in a shapegroup": ('<shape type="shapegroup" id="g"><shape type="cube"/>\n<bsdf type="diffuse"/>'
+                                      '</shape>', 3, "holds shapes only"),
+    "instance without a group": ('<shape type="instance">\n</shape>', 2, "must be specified", "<ref id="),
+    "instance of a plain shape": ('<shape type="instance">\n<shape type="cube"/></shape>', 3,
+                                  "Only a shapegroup can be specified"),
+    "instance of two groups": ('<shape type="shapegroup" id="g"><shape type="cube"/></shape><shape type="shapegroup" id="h"><shape type="cube"/></shape>'
+                               '<shape type="instance"><ref id="g"/>\n<ref id="h"/></shape>', 3,
+                               "Only a single shapegroup"),
+    "singular instance": ('<shape type="shapegroup" id="g"><shape type="cube"/></shape><shape type="instance"><ref id="g"/>\n<transform name="to_world">'
+                          '<scale x="0"/></transform></shape>', 3, "singular"),
     "direct with media": ('<integrator type="direct"/>\n<shape type="cube"><bsdf type="null"/>'
                           '<medium type="homogeneous" name="interior"/></shape>', 1, "direct",
                           "ignores media", "volpath"),

@@ -145,6 +145,10 @@ def cmd_info(args):
     cylinders = packed.stats.get("cylinders", 0)
     print(f"shapes     {len(scene.shapes)} ({packed.triangle_count} triangles, {packed.sphere_count} spheres"
           + (f", {cylinders} cylinders)" if cylinders else ")"))
+    if scene.instances:
+        groups = len({id(i.group) for i in scene.instances})
+        print(f"instances  {len(scene.instances)} of {groups} shape group{'s' if groups != 1 else ''} "
+              f"(each group's geometry stored once)")
     kinds = ["area"] * sum(s.emitter_radiance is not None for s in scene.shapes) + [
         f"envmap {e.image.shape[1]}x{e.image.shape[0]}, {packed.arrays['env_data'].nbytes / 2**20:.1f} MiB"
         if e.kind == "envmap" else e.kind for e in scene.emitters]

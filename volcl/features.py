@@ -39,6 +39,7 @@ FLAGS = (
     "BUMP_MAPS",            # bump or normal maps
     "PHASE_FAMILIES",       # phase functions beyond HG: Rayleigh, Draine, Cornette-Shanks, Fournier-Forand,
                             # tabulated, blends, approximate Mie (one flag: volcl/phase.py, README)
+    "INSTANCES",            # shape groups placed by instances: a two-level BVH (kernels/bvh.h)
 )
 
 
@@ -70,6 +71,7 @@ def detect(scene: Scene) -> dict[str, bool]:
     f = dict.fromkeys(FLAGS, False)
     f["SPHERES"] = any(s.kind == "sphere" for s in scene.shapes)
     f["CYLINDERS"] = any(s.kind == "cylinder" for s in scene.shapes)
+    f["INSTANCES"] = bool(getattr(scene, "instances", None))
     f["THINLENS"] = scene.camera.kind == "thinlens"
     f["ORTHOGRAPHIC"] = scene.camera.kind == "orthographic"
     f["DIRECT"] = scene.integrator.kind == "direct"
@@ -115,11 +117,30 @@ _PROBES /= np.linalg.norm(_PROBES, axis=1, keepdims=True)
 
 def _first_transition(scene: Scene, o: np.ndarray, d: np.ndarray):
     """(shape, dot(d, ng)) of the nearest shape naming a medium that the ray o + t d (t > 0) meets,
-    or None. Shapes that name no medium are passed through: crossing them changes no medium."""
-    best_t, best = np.inf, None
-    for s in scene.shapes:
-        if s.interior is None and s.exterior is None:
+    or None. Shapes that name no medium are passed through: crossing them changes no medium. Shapes
+    of a shape group are met where its instances place them: the ray is taken into the group's space
+    (the kernels' normal convention, the inverse transpose, keeps the sign of dot(d, ng) there)."""
+    def names_medium(s):
+        return s.interior is not None or s.exterior is not None
+    best_t, best = _nearest_transition([s for s in scene.shapes if s.group is None and names_medium(s)],
+                                       o, d, np.inf, None)
+    for inst in getattr(scene, "instances", ()):
+        members = [s for s in inst.group.shapes if names_medium(s)]
+        if not members:
             continue
+        inv = np.linalg.inv(inst.to_world)
+        lo, ld = inv[:3, :3] @ o + inv[:3, 3], inv[:3, :3] @ d
+        length = float(np.linalg.norm(ld))
+        t, found = _nearest_transition(members, lo, ld / length, best_t * length, None)
+        if found is not None:
+            best_t, best = t / length, found
+    return best
+
+
+def _nearest_transition(shapes, o, d, best_t, best):
+    """(t, (shape, dot(d, ng))) of the nearest crossing closer than best_t of `shapes` by the ray
+    o + t d (|d| = 1), else (best_t, best)."""
+    for s in shapes:
         if s.kind == "cylinder":
             hit = _cylinder_hit(s, o, d, best_t)
             if hit is not None:
@@ -154,7 +175,7 @@ def _first_transition(scene: Scene, o: np.ndarray, d: np.ndarray):
             if hit.any():
                 k = np.flatnonzero(hit)[np.argmin(t[hit])]
                 best_t, best = t[k], (s, float(np.cross(e1[k], e2[k]) @ d))
-    return best
+    return best_t, best
 
 
 def _cylinder_hit(s, o: np.ndarray, d: np.ndarray, best_t: float):

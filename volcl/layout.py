@@ -62,6 +62,13 @@ CYLINDER = np.dtype([
 ])
 # analytic index of cylinder k (kernels/cylinder.h): BVH code -(index + 1), and Light.sphere
 CYLINDER_CODE_BASE = 1 << 30
+# an instance of a shape group (kernels/bvh.h): analytic index INSTANCE_CODE_BASE + k in the top-level
+# tree, below the cylinders' base; its group's tree starts at wide node `root`
+INSTANCE = np.dtype([
+    ("to_world", np.float32, 12), ("to_object", np.float32, 12),
+    ("root", np.int32), ("pad0", np.int32, 3),
+])
+INSTANCE_CODE_BASE = 1 << 29
 
 SHAPE_INFO = np.dtype([
     ("bsdf", np.int32), ("light", np.int32), ("interior", np.int32), ("exterior", np.int32),
@@ -167,7 +174,7 @@ HIDE_EMITTERS = {"off": 0, "dark": 1, "skip": 2}
 # name in kernels/types.h -> dtype, for the layout probe
 SHARED_STRUCTS = {
     "BvhWideNode": BVH_WIDE_NODE, "LeafPacket": LEAF_PACKET, "Triangle": TRIANGLE, "TriangleNormals": TRIANGLE_NORMALS, "Sphere": SPHERE,
-    "Cylinder": CYLINDER,
+    "Cylinder": CYLINDER, "Instance": INSTANCE,
     "ShapeInfo": SHAPE_INFO, "Bsdf": BSDF, "Light": LIGHT, "Medium": MEDIUM, "GridVolume": GRID_VOLUME,
     "RenderParams": RENDER_PARAMS, "TriangleUv": TRIANGLE_UV, "UvMap": UV_MAP, "Texture": TEXTURE,
     "PhaseLobe": PHASE_LOBE,

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import emission_sampler, envmap, layout
+from .bvh_instanced import two_level_bvh
 from .bvh_wide import device_bvh, empty_wide
 from .errors import VolclError
 from .features import detect
@@ -43,7 +44,8 @@ FILTER_TABLE_SIZE = 4097
 
 # part -> the arrays it packs, in the order parts are packed (shapes name the lights)
 PARTS = {
-    "geometry": ("nodes", "leaves", "triangles", "normals", "spheres", "cylinders", "tri_uvs", "uv_maps"),
+    "geometry": ("nodes", "leaves", "triangles", "normals", "spheres", "cylinders", "tri_uvs", "uv_maps",
+                 "instances"),
     "lights": ("lights", "light_tri_cdf", "light_tris", "env_data"),
     "shapes": ("shapes",),
     "bsdfs": ("bsdfs", "textures", "texels", "bsdf_tables"),
@@ -53,7 +55,8 @@ PARTS = {
 # the kernel's buffer arguments, in order (kernels/render.cl)
 ARG_ORDER = ("nodes", "leaves", "triangles", "normals", "spheres", "cylinders", "shapes", "bsdfs", "lights",
              "light_tri_cdf", "light_tris", "env_data", "media", "grids", "grid_data", "params", "filter_table",
-             "tri_uvs", "uv_maps", "textures", "texels", "bsdf_tables", "phase_lobes", "phase_tables")
+             "tri_uvs", "uv_maps", "textures", "texels", "bsdf_tables", "phase_lobes", "phase_tables",
+             "instances")
 
 
 @dataclass
@@ -315,6 +318,7 @@ class Packer:
             hi.append(np.array([b[1] for b in boxes]))
             codes.append((-1 - layout.CYLINDER_CODE_BASE - np.arange(len(self.cylinder_shapes))).astype(np.int32))
         codes = np.concatenate(codes)
+        self.arrays["instances"] = np.zeros(1, layout.INSTANCE)     # _instanced_bvh's, where there are any
         t0 = time.perf_counter()
         if len(codes):
             # shadow rays stop at the first opaque surface (kernels/bvh.h TRACE_SHADOW); a shape's
@@ -323,9 +327,13 @@ class Packer:
             analytic_shape = np.array([self.shape_index[id(s)] for s in self.sphere_shapes + self.cylinder_shapes],
                                       np.int64)
             opaque = np.concatenate([shape_opaque[tri_shape], shape_opaque[analytic_shape]])
-            nodes, leaves = device_bvh(codes, np.concatenate(lo), np.concatenate(hi), tri_v, opaque,
-                                       max_leaf=self.max_leaf)
-            self.bounds = (np.concatenate(lo).min(0), np.concatenate(hi).max(0))
+            if self.scene.instances:
+                nodes, leaves = self._instanced_bvh(codes, np.concatenate(lo), np.concatenate(hi), tri_v, opaque,
+                                                    np.concatenate([tri_shape, analytic_shape]))
+            else:
+                nodes, leaves = device_bvh(codes, np.concatenate(lo), np.concatenate(hi), tri_v, opaque,
+                                           max_leaf=self.max_leaf)
+                self.bounds = (np.concatenate(lo).min(0), np.concatenate(hi).max(0))
         else:
             nodes, leaves = empty_wide(), np.zeros(1, layout.LEAF_PACKET)
             self.bounds = (np.zeros(3), np.zeros(3))
@@ -333,6 +341,22 @@ class Packer:
         self.triangle_count = ntri
         self.arrays.update(nodes=nodes, leaves=leaves, triangles=tris, normals=normals, spheres=spheres,
                            cylinders=cylinders, tri_uvs=tri_uvs, uv_maps=self._uv_maps())
+
+    def _instanced_bvh(self, codes, lo, hi, tri_v, opaque, prim_shape):
+        """The two-level BVH (volcl.bvh_instanced) of a scene with instances; sets self.bounds to
+        the world box of what the instances place and the scene's own shapes."""
+        group_index = {}
+        for inst in self.scene.instances:
+            group_index.setdefault(id(inst.group), len(group_index))
+        shape_group = np.array([group_index.get(id(s.group), -1) if s.group is not None else -1
+                                for s in self.scene.shapes], np.int64)
+        placements = [(group_index[id(i.group)], i.to_world) for i in self.scene.instances]
+        nodes, leaves, records, bounds = two_level_bvh(codes, lo, hi, tri_v, opaque, shape_group[prim_shape],
+                                                       placements, max_leaf=self.max_leaf)
+        self.arrays["instances"] = records
+        self.stats["instances"] = len(self.scene.instances)
+        self.bounds = bounds if bounds is not None else (np.zeros(3), np.zeros(3))
+        return nodes, leaves
 
     def _triangle_uvs(self, tris: np.ndarray) -> np.ndarray:
         """Corner uvs of the triangles whose bsdf reads them (kernels/texcoords.h), and their index

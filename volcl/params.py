@@ -30,7 +30,8 @@ from .errors import VolclError
 from .pack_materials import chain, texture_tree, textures_of
 from .scene import checks
 from .scene.checks import CheckError
-from .scene.model import Bsdf, Camera, Emitter, Medium, Phase, Scene as ModelScene, Shape, Texture, Volume, rgb
+from .scene.model import (Bsdf, Camera, Emitter, Instance, Medium, Phase, Scene as ModelScene, Shape, Texture,
+                          Volume, rgb)
 from .scene.objects import IOR_NAMES
 from .scene.shapes import place
 
@@ -460,6 +461,19 @@ def _shape_params(scene: ModelScene, s: Shape, prefix: str):
                     ("geometry", "lights"), owner)
 
 
+def _instance_params(scene: ModelScene, inst: Instance, prefix: str):
+    """An instance's to_world (repacks the geometry: the instance records and the trees)."""
+    owner = _owner("<shape type=\"instance\">", inst, "instance")
+
+    def put(m):
+        m = np.asarray(m, np.float64)
+        if not np.isfinite(m).all() or abs(np.linalg.det(m[:3, :3])) < 1e-30:
+            raise CheckError("an instance's to_world must be finite and not singular (it would flatten the group)")
+        inst.to_world = m.copy()
+    yield Param(f"{prefix}.to_world", "to_world", "transform", lambda: np.array(inst.to_world, np.float64), put,
+                ("geometry",), owner)
+
+
 def _area_emitter_params(scene: ModelScene, s: Shape, prefix: str):
     owner = _owner("<emitter type=\"area\">", s, "shape")
 
@@ -484,6 +498,7 @@ PARAMETERS = {
     Bsdf: _bsdf_params,
     Medium: _medium_params,
     Emitter: _emitter_params,
+    Instance: _instance_params,
 }
 
 
@@ -540,6 +555,8 @@ def collect(scene: ModelScene) -> dict:
                 prefix = name(m, f"{key}.{side}_medium")
                 if prefix:
                     add(PARAMETERS[Medium](scene, m, prefix))
+    for i, inst in enumerate(scene.instances):
+        add(PARAMETERS[Instance](scene, inst, name(inst, f"instance_{i}")))
     for i, e in enumerate(scene.emitters):
         add(PARAMETERS[Emitter](scene, e, name(e, f"emitter_{i}"), textures))
     for i, m in enumerate(scene.media):
@@ -562,6 +579,7 @@ def _all_textures(scene: ModelScene):
 def _objects(scene: ModelScene):
     yield scene.camera
     yield from scene.shapes
+    yield from scene.instances
     yield from (b for s in scene.shapes for b in chain(s.bsdf))
     yield from scene.emitters
     yield from scene.media

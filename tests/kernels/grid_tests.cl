@@ -25,10 +25,11 @@
     __global const RenderParams *params, __global const float *filter_table,                            \
     __global const TriangleUv *tri_uvs, __global const UvMap *uv_maps, __global const Texture *textures, \
     __global const float *texels, __global const float *bsdf_tables,                                    \
-    __global const PhaseLobe *phase_lobes, __global const float *phase_tables
+    __global const PhaseLobe *phase_lobes, __global const float *phase_tables,                          \
+    __global const Instance *instances
 #define SCENE_INIT {nodes, leaves, triangles, normals, spheres, cylinders, shapes, bsdfs, lights, light_tri_cdf, \
                     light_tris, env_data, media, grids, grid_data, params, tri_uvs, uv_maps, textures, texels, \
-                    bsdf_tables, phase_lobes, phase_tables}
+                    bsdf_tables, phase_lobes, phase_tables, instances}
 
 /* grid_lookup of descriptor `grid` at local points (3 floats each). */
 VOLCL_KERNEL void lookups(__global const GridVolume *grids, __global const float *grid_data,

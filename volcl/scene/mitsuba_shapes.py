@@ -1,4 +1,5 @@
-"""Mitsuba shapes (src/shapes): mesh files, the primitive meshes, analytic spheres and cylinders.
+"""Mitsuba shapes (src/shapes): mesh files, the primitive meshes, analytic spheres and cylinders;
+shape groups and their instances in mitsuba_instances.
 
 Mesh files without vertex normals get smooth ones computed as Mitsuba computes them, unless
 `face_normals` is set (Mitsuba's obj, ply and serialized plugins all do this); normals that come out
@@ -10,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import mesh as meshes
-from . import objects, transform as tf
+from . import mitsuba_instances, objects, transform as tf
 from .objects import AreaLight
 from .parse_common import Node, Spec
 from .shapes import PRIMITIVES, cylinder_shape, mesh_shape, sphere_shape
@@ -30,19 +31,15 @@ SPECS = {
                    children=_CHILDREN, ignored=_COMMON_NOTES),
     "cylinder": Spec({"p0": "point", "p1": "point", "radius": "float", "flip_normals": "bool",
                       **_TO_WORLD}, children=_CHILDREN, ignored=_COMMON_NOTES),
-    # accepted by the table so that the error can say what is missing (see build_shape)
-    "shapegroup": Spec(other_params="warn", children=frozenset({"shape", "bsdf", "emitter", "medium"})),
-    "instance": Spec(other_params="warn", children=frozenset({"shape"})),
+    **mitsuba_instances.SPECS,
 }
-
-_NOT_YET = ("instancing (<shape type=\"shapegroup\"> with <shape type=\"instance\">) is not supported "
-            "yet: it needs a two-level BVH, which comes after the BVH rework; flatten the instances "
-            "into ordinary shapes for now")
 
 
 def build_shape(node: Node):
-    if node.type in ("shapegroup", "instance"):
-        raise node.fail(None, _NOT_YET)
+    if node.type == "shapegroup":
+        return mitsuba_instances.build_shapegroup(node)
+    if node.type == "instance":
+        return mitsuba_instances.build_instance(node)
     emitter = node.single("emitter")
     bsdf = node.single("bsdf")
     bsdf = bsdf.obj if bsdf else objects.default_bsdf(emitter=emitter is not None)
@@ -64,7 +61,7 @@ def build_shape(node: Node):
         shape = mesh_shape(mesh, to_world, bsdf=bsdf, source=node.source(), where=node.at("to_world"),
                            face_normals=node.bool("face_normals", False), flip_normals=flip,
                            smooth_normals=mesh.normals is None and node.type not in PRIMITIVES,
-                           normal_matrix=normal_matrix)
+                           normal_matrix=normal_matrix, normal_by_transform=node.type in ("rectangle", "disk"))
     if node.type == "disk":
         shape.uv_map = "disk"
     _attach_emitter_and_media(node, shape, emitter)

@@ -172,8 +172,8 @@ class Bsdf:
 
 @dataclass
 class Shape:
-    """A shape in world space. Instancing (Mitsuba's shapegroup / instance) is to come as a shape
-    that refers to a shared group of shapes with its own to_world; nothing here assumes it cannot."""
+    """A shape in world space, or, for a member of a ShapeGroup (`group`), in the group's space:
+    the group's instances place it in the world (Scene.instances)."""
     kind: str                        # 'mesh' | 'sphere' | 'cylinder'
     bsdf: Bsdf
     vertices: Optional[np.ndarray] = None     # (n, 3) float64, world space
@@ -202,6 +202,29 @@ class Shape:
     normal_matrix: Optional[np.ndarray] = None
     emitter_id: str = ""             # the area emitter's own id, if it has one
     uv_map: str = ""                 # 'disk': a disk mesh with Mitsuba's analytic disk uvs (u = r, v = phi / 2 pi)
+    group: Optional["ShapeGroup"] = None      # the shapegroup this shape belongs to, if any
+    # Mitsuba's rectangle and disk are analytic: their normal is to_world's inverse transpose of +z,
+    # so a mirroring to_world does not turn them around as it turns a mesh's winding
+    normal_by_transform: bool = False
+
+
+@dataclass
+class ShapeGroup:
+    """Mitsuba's shapegroup: shapes that render only where an Instance places them. Its shapes are
+    also in Scene.shapes (after the scene's own), each with `group` set to it; the device keeps one
+    copy of their geometry, however many instances there are."""
+    shapes: list = field(default_factory=list)
+    id: str = ""
+    source: Optional[Source] = None
+
+
+@dataclass
+class Instance:
+    """Mitsuba's instance: a ShapeGroup placed in the world by an affine to_world (4x4)."""
+    group: ShapeGroup
+    to_world: np.ndarray = field(default_factory=lambda: np.eye(4))
+    id: str = ""
+    source: Optional[Source] = None
 
 
 @dataclass
@@ -281,6 +304,7 @@ class Scene:
     warnings: list = field(default_factory=list)
     sensors: list = field(default_factory=list)     # every Sensor of the file; camera/spp/seed are one's
     sensor_index: int = 0
+    instances: list = field(default_factory=list)   # Instance placements of shape groups
 
 
 def select_sensor(scene: Scene, index: int) -> None:

@@ -13,7 +13,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from . import checks, mitsuba_bsdfs, mitsuba_sensors, mitsuba_shapes, objects, textures, transform as tf
+from . import checks, mitsuba_bsdfs, mitsuba_instances, mitsuba_sensors, mitsuba_shapes, objects, textures, transform as tf
 from .model import (Camera, Emitter, Integrator, Medium, Phase, Scene, Sensor, Volume, rgb,
                     select_sensor)
 from .objects import AreaLight
@@ -97,8 +97,8 @@ def build_scene(node: Node) -> Scene:
     integrator = node.single("integrator")
     if integrator is None:
         ctx.warn(node.element, "no <integrator>: using volpathmis (max_depth -1, rr_depth 5)")
-    shapes = [c.obj for c in node.objects("shape")]
-    sensors = [c.obj for c in node.objects("sensor")] or [_default_sensor(node, shapes)]
+    shapes, instances = mitsuba_instances.scene_shapes([c.obj for c in node.objects("shape")])
+    sensors = [c.obj for c in node.objects("sensor")] or [_default_sensor(node, shapes, instances)]
     if len(sensors) > 1:
         ctx.warn(node.objects("sensor")[1].element,
                  f"the scene has {len(sensors)} sensors; volcl renders the first (line "
@@ -116,7 +116,7 @@ def build_scene(node: Node) -> Scene:
     _one_environment(node)
     scene = Scene(path=ctx.path, dialect="mitsuba",
                   integrator=integrator.obj if integrator else Integrator(),
-                  shapes=shapes, emitters=emitters, sensors=sensors,
+                  shapes=shapes, emitters=emitters, sensors=sensors, instances=instances,
                   warnings=ctx.warnings[node.first_warning:])
     select_sensor(scene, 0)
     _check_integrator(node, scene)
@@ -154,12 +154,14 @@ def _environment_through_unbounded_medium(node: Node, scene: Scene) -> None:
                                     "render the same image in both")
 
 
-def _default_sensor(node: Node, shapes) -> Sensor:
+def _default_sensor(node: Node, shapes, instances) -> Sensor:
     """What Mitsuba 3 does without a sensor: 45 degrees, looking along +z at the whole scene."""
     node.ctx.warn(node.element, "no <sensor>: using Mitsuba's default perspective camera "
                                 "(fov 45, looking along +z at the scene's bounding box)")
     camera = Camera(fov=45.0, fov_axis="x", rfilter=mitsuba_sensors.Film().rfilter)
-    box = bounds(shapes)
+    boxes = [b for b in [bounds([s for s in shapes if s.group is None])] if b is not None]
+    boxes += mitsuba_instances.instance_bounds(instances, bounds)
+    box = (np.min([b[0] for b in boxes], 0), np.max([b[1] for b in boxes], 0)) if boxes else None
     if box is not None and np.max(box[1] - box[0]) > 0:
         center, extents = (box[0] + box[1]) / 2, box[1] - box[0]
         distance = extents.max() / (2.0 * math.tan(math.radians(45.0) / 2))

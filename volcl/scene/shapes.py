@@ -33,7 +33,9 @@ def place(shape: Shape, to_world: np.ndarray, normal_matrix=None) -> None:
         if s is None:
             raise CheckError("a sphere's to_world must be a similarity transform (rotation, uniform "
                              "scale, translation); a non-uniform scale or shear would make it an "
-                             "ellipsoid, which is not supported: use a mesh instead")
+                             "ellipsoid, which is not supported for a shape placed directly: use a mesh, or put "
+                             "the sphere in a shapegroup and place it by an instance with this to_world "
+                             "(intersected exactly, as Mitsuba does)")
         center, radius = tf.apply_point(to_world, center), float(radius) * s
         if not ((np.abs(center) <= FLOAT32_MAX).all() and radius <= FLOAT32_MAX):
             raise CheckError("to_world moves the sphere beyond the floating-point range")
@@ -64,7 +66,8 @@ def _place_mesh(shape: Shape, to_world: np.ndarray, normal_matrix) -> None:
     elif shape.smooth_normals and not shape.face_normals:
         normals = _smooth_normals(vertices, mesh.faces)
     faces = mesh.faces.copy()
-    if shape.flip_normals:
+    mirrored = shape.normal_by_transform and np.linalg.det(np.asarray(to_world, np.float64)[:3, :3]) < 0
+    if shape.flip_normals != mirrored:
         faces = faces[:, ::-1].copy()
         normals = None if normals is None else -normals
     shape.vertices, shape.faces, shape.normals, shape.uvs = vertices, faces, normals, mesh.uvs
@@ -80,10 +83,12 @@ def _smooth_normals(vertices: np.ndarray, faces: np.ndarray):
 
 def mesh_shape(mesh: meshes.TriangleMesh, to_world: np.ndarray, *, bsdf: Bsdf, source: Source,
                where: Element, face_normals: bool = False, flip_normals: bool = False,
-               smooth_normals: bool = False, normal_matrix=None) -> Shape:
-    """smooth_normals: a mesh file without normals gets Mitsuba's computed vertex normals."""
+               smooth_normals: bool = False, normal_matrix=None, normal_by_transform: bool = False) -> Shape:
+    """smooth_normals: a mesh file without normals gets Mitsuba's computed vertex normals;
+    normal_by_transform: Mitsuba's analytic rectangle and disk (see Shape.normal_by_transform)."""
     shape = Shape(kind="mesh", bsdf=bsdf, flip_normals=flip_normals, source=source, local=mesh,
-                  face_normals=face_normals, smooth_normals=smooth_normals)
+                  face_normals=face_normals, smooth_normals=smooth_normals,
+                  normal_by_transform=normal_by_transform)
     try:
         place(shape, to_world, normal_matrix)
     except CheckError as exc:
