@@ -203,6 +203,24 @@ inline int packet_analytic_intersect(const SceneData *sc, __global const LeafPac
     return found;
 }
 
+/* The packets of leaf reference ref (< 0) against the query: as packet_triangles_intersect
+ * returns, over all of them (2 as soon as the query can stop). */
+__attribute__((always_inline))
+inline int leaf_intersect(const SceneData *sc, int ref, const Shear *sh, float3 o, float3 d, int mode, Hit *hit) {
+    int leaf = ~ref;
+    int first = leaf >> 4, end = first + (leaf & 15) + 1;
+    int found = 0;
+    for (int i = first; i < end; ++i) {
+        __global const LeafPacket *pk = &sc->leaves[i];
+        int h = packet_triangles_intersect(pk, sh, hit->t, mode, hit);
+        if (h == 2) return 2;
+        int ha = packet_analytic_intersect(sc, pk, o, d, mode, hit);
+        if (ha == 2) return 2;
+        found |= h | ha;
+    }
+    return found != 0;
+}
+
 /* Per-ray constants of the box tests: origin and reciprocal direction splatted over the child
  * lanes, and for each axis the bounds row (offset in floats) of the slab plane a ray meets first. */
 typedef struct {
@@ -274,6 +292,16 @@ inline int lowest_lane(int mask) { return 31 - clz(mask & -mask); }
  * (volcl/bvh_wide.py). An empty scene is one node without children, which no ray enters. */
 inline bool bvh_trace(const SceneData *sc, float3 o, float3 d, float tmax, int mode, Hit *hit) {
     Shear sh = shear_make(o, d);
+    hit->t = tmax;
+    hit->prim = 0;
+    hit->b1 = hit->b2 = 0.0f;
+    /* A tree that is one leaf (a scene of a few primitives): its packets without the box test and
+     * the stack. Slots of a node are filled first to last and no node refers to the root (0), so
+     * child[1] == 0 says the root has one child. The box test culls nothing the primitives' own
+     * tests would not, so the hit is the same. */
+    __global const BvhWideNode *root = &sc->nodes[0];
+    if (root->child[0] < 0 && root->child[1] == 0)
+        return leaf_intersect(sc, root->child[0], &sh, o, d, mode, hit) != 0;
     /* a zero direction component becomes a tiny one of the same sign: its slab then spans
      * +-1e30 instead of producing 0 * INF = NaN for an origin on the slab plane */
     float3 inv_d = 1.0f / select(d, copysign((float3)(1e-30f), d), fabs(d) < (float3)(1e-30f));
@@ -283,9 +311,6 @@ inline bool bvh_trace(const SceneData *sc, float3 o, float3 d, float tmax, int m
     int top = 0;
     int ref = 0;            /* the node or leaf visited now: the root first */
     bool found = false;
-    hit->t = tmax;
-    hit->prim = 0;
-    hit->b1 = hit->b2 = 0.0f;
     for (;;) {
         if (ref >= 0) {
             __global const BvhWideNode *n = &sc->nodes[ref];
@@ -322,16 +347,9 @@ inline bool bvh_trace(const SceneData *sc, float3 o, float3 d, float tmax, int m
                 continue;
             }
         } else {
-            int leaf = ~ref;
-            int first = leaf >> 4, end = first + (leaf & 15) + 1;
-            for (int i = first; i < end; ++i) {
-                __global const LeafPacket *pk = &sc->leaves[i];
-                int h = packet_triangles_intersect(pk, &sh, hit->t, mode, hit);
-                if (h == 2) return true;
-                int ha = packet_analytic_intersect(sc, pk, o, d, mode, hit);
-                if (ha == 2) return true;
-                found |= (h | ha) != 0;
-            }
+            int h = leaf_intersect(sc, ref, &sh, o, d, mode, hit);
+            if (h == 2) return true;
+            found |= h != 0;
         }
         /* next from the stack, skipping entries whose box the ray enters beyond the closest hit */
         do {
