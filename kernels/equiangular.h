@@ -59,15 +59,19 @@ inline float equiangular_segment_pdf(const EquiangularSegment *s, float t) {
  *     t = t0 + sin(phi) (h^2 + u0^2) / (h cos(phi) - u0 sin(phi)),
  * which has no cancellation at t0 and a denominator that stays positive (it is
  * sqrt(h^2 + u0^2) cos(theta0 + phi) with theta0 + phi < atan(EQUIANGULAR_SPAN) < pi/2). */
+inline bool equiangular_segment_sample(const EquiangularSegment *s, float u, float *t, float *pdf) {
+    float phi = u * s->theta;
+    float sp = sin(phi), cp = cos(phi);
+    float x = s->t0 + sp * (s->h * s->h + s->u0 * s->u0) / (s->h * cp - s->u0 * sp);
+    *t = clamp(x, s->t0, s->t1);
+    *pdf = equiangular_segment_pdf(s, *t);
+    return *pdf > 0.0f;
+}
+
 inline bool sample_equiangular(float3 o, float3 d, float t_max, float3 light, float u, float *t, float *pdf) {
     EquiangularSegment s;
     if (!equiangular_segment(o, d, t_max, light, &s)) return false;
-    float phi = u * s.theta;
-    float sp = sin(phi), cp = cos(phi);
-    float x = s.t0 + sp * (s.h * s.h + s.u0 * s.u0) / (s.h * cp - s.u0 * sp);
-    *t = clamp(x, s.t0, s.t1);
-    *pdf = equiangular_segment_pdf(&s, *t);
-    return *pdf > 0.0f;
+    return equiangular_segment_sample(&s, u, t, pdf);
 }
 
 inline float sample_equiangular_pdf(float3 o, float3 d, float t_max, float3 light, float t) {
