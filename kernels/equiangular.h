@@ -61,7 +61,7 @@ inline float equiangular_segment_pdf(const EquiangularSegment *s, float t) {
  * sqrt(h^2 + u0^2) cos(theta0 + phi) with theta0 + phi < atan(EQUIANGULAR_SPAN) < pi/2). */
 inline bool equiangular_segment_sample(const EquiangularSegment *s, float u, float *t, float *pdf) {
     float phi = u * s->theta;
-    float sp = sin(phi), cp = cos(phi);
+    float cp, sp = sincos(phi, &cp);
     float x = s->t0 + sp * (s->h * s->h + s->u0 * s->u0) / (s->h * cp - s->u0 * sp);
     *t = clamp(x, s->t0, s->t1);
     *pdf = equiangular_segment_pdf(s, *t);
