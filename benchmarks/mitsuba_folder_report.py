@@ -1,9 +1,9 @@
 """Does volcl open, render and agree with Mitsuba 3 on every scene of a folder?
 
-    python benchmarks/mitsuba_folder_report.py FOLDER... [--spp 64] [--max-size 160]
+    python benchmarks/mitsuba_folder_report.py FOLDER_OR_FILE... [--spp 64] [--max-size 160]
         [--seeds 0 1] [--out DIR] [--markdown REPORT.md] [--mitsuba-python PY] [--variant V]
 
-Every .xml file under the folders is a candidate; files that another candidate includes, files
+Every .xml file under the folders (and every file named) is a candidate; files that another candidate includes, files
 whose root is not <scene>, and scenes with neither a shape nor an include (parameter or material
 files) are listed as fragments and not rendered on their own. For each
 scene:
@@ -54,7 +54,8 @@ class Row:
 
 
 def candidates(folders):
-    files = sorted({p.resolve() for f in folders for p in Path(f).rglob("*.xml")})
+    files = sorted({p.resolve() for f in folders
+                    for p in ([Path(f)] if Path(f).is_file() else Path(f).rglob("*.xml"))})
     included = {}
     for path in files:
         text = _COMMENT.sub("", path.read_text(errors="replace"))

@@ -24,6 +24,8 @@ from volcl import microfacet
 from volcl.pack_materials import MaterialPacker
 from volcl.scene.model import Bsdf, rgb
 
+pytestmark = pytest.mark.every_implementation
+
 F32 = float(np.finfo(np.float32).eps)
 f32 = np.float32
 N = 200_000

@@ -20,6 +20,8 @@ from volcl.pack import pack
 from volcl.scene import transform as tf
 from volcl.scene.model import Emitter, rgb
 
+pytestmark = pytest.mark.every_implementation
+
 N = 1_000_000
 f32, i32, u32 = np.float32, np.int32, np.uint32
 HERE = Path(__file__).resolve().parent

@@ -11,7 +11,6 @@ import json
 import os
 import struct
 import subprocess
-import sys
 import zlib
 from pathlib import Path
 
@@ -34,6 +33,31 @@ def mitsuba_python():
     if env:
         return env
     return str(DEFAULT_MITSUBA) if DEFAULT_MITSUBA.is_file() else None
+
+
+def mitsuba_references(folder: Path, jobs: list, timeout: float = 1800):
+    """Mitsuba renders `jobs` (dicts of scene, out, spp, seeds, variant[, defines]) in its own
+    interpreter (tests/mitsuba_runner.py); the calling test skips without Mitsuba. Returns
+    (status line by output, Mitsuba's stderr)."""
+    python = mitsuba_python()
+    if python is None or subprocess.run([python, "-c", "import mitsuba"], capture_output=True).returncode != 0:
+        pytest.skip("Mitsuba 3 not found (set VOLCL_MITSUBA_PYTHON to a Python that has it)")
+    (folder / "jobs.json").write_text(json.dumps(jobs))
+    proc = subprocess.run([python, str(HERE / "mitsuba_runner.py"), str(folder / "jobs.json")],
+                          capture_output=True, text=True, timeout=timeout)
+    status = {line.split()[1].rstrip(":"): line for line in proc.stdout.splitlines()
+              if line.startswith(("done", "failed"))}
+    return status, proc.stderr
+
+
+def reference_image(references, out: str):
+    """(mean, variance of the mean) of Mitsuba's seeds for the job writing `out`; fails, with what
+    Mitsuba said, where it could not render it."""
+    status, stderr = references
+    assert status.get(out, "").startswith("done"), f"Mitsuba could not render {out}: {status.get(out)} {stderr[-2000:]}"
+    mean, _ = read_image(out + "_mean.exr")
+    var, _ = read_image(out + "_var.exr")
+    return mean[..., :3], var[..., :3]
 
 
 def sensor(width=24, height=24, spp=64, origin="0, 0, 4", target="0, 0, 0", up="0, 1, 0", fov=40,
@@ -295,9 +319,6 @@ CASES = _cases()
 
 @pytest.fixture(scope="module")
 def mitsuba_images(tmp_path_factory):
-    python = mitsuba_python()
-    if python is None or subprocess.run([python, "-c", "import mitsuba"], capture_output=True).returncode != 0:
-        pytest.skip("Mitsuba 3 not found (set VOLCL_MITSUBA_PYTHON to a Python that has it)")
     folder = tmp_path_factory.mktemp("mitsuba_agreement")
     _files(folder)
     jobs = []
@@ -305,22 +326,14 @@ def mitsuba_images(tmp_path_factory):
         (folder / f"{name}.xml").write_text(text)
         jobs.append({"scene": str(folder / f"{name}.xml"), "out": str(folder / name), "spp": spp,
                      "seeds": SEEDS, "variant": variant})
-    (folder / "jobs.json").write_text(json.dumps(jobs))
-    proc = subprocess.run([python, str(HERE / "mitsuba_runner.py"), str(folder / "jobs.json")],
-                          capture_output=True, text=True, timeout=1800)
-    status = {line.split()[1].rstrip(":"): line for line in proc.stdout.splitlines()
-              if line.startswith(("done", "failed"))}
-    return folder, status, proc.stderr
+    return folder, mitsuba_references(folder, jobs)
 
 
 @pytest.mark.parametrize("name", list(CASES))
 def test_matches_mitsuba(mitsuba_images, device, name):
-    folder, status, stderr = mitsuba_images
-    out = str(folder / name)
-    assert status.get(out, "").startswith("done"), f"Mitsuba could not render {name}: {status.get(out)} {stderr[-2000:]}"
-    mean, _ = read_image(out + "_mean.exr")
-    var, _ = read_image(out + "_var.exr")
+    folder, references = mitsuba_images
+    mean, var = reference_image(references, str(folder / name))
     scene = load(folder / f"{name}.xml")
     result = Renderer(scene, device=device, seed=3).render(CASES[name][1])
     # Mitsuba's variance is that of the mean of its seeds' images; its renders share nothing
-    assert_mean_matches(result, mean[..., :3], blocks=4, what=name, expected_variance=var[..., :3])
+    assert_mean_matches(result, mean, blocks=4, what=name, expected_variance=var)

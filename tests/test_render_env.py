@@ -19,6 +19,8 @@ from volcl.renderer import render
 from volcl.scene import transform as tf
 from volcl.scene.model import Bsdf, Emitter, Shape, Texture, rgb
 
+pytestmark = pytest.mark.every_implementation
+
 OFF_AXIS = tf.rotate([1.0, 2.0, 3.0], 50.0)
 
 

@@ -11,6 +11,8 @@ from test_render_surfaces import _silhouette_coverage
 from volcl import render
 from volcl.scene.model import Bsdf, Emitter, Medium, Shape, rgb
 
+pytestmark = pytest.mark.every_implementation
+
 
 def sphere_scene(bsdf, medium=None):
     cam = camera(16, 16, fov=30, to_world=look_at((0, 0, 5), (0, 0, 0)))

@@ -356,3 +356,27 @@ def test_spot_projection_texture(tmp_path):
     light = [r for r in packed.arrays["lights"] if r["type"] == 5][0]
     assert light["texture"] == 1 and packed.arrays["textures"][1]["width"] == 6
     assert np.isclose(light["tan_cutoff"], np.tan(np.radians(20.0)))
+
+
+SLIDE_SCENE = TEMPLATE.replace(
+    '<transform name="to_world"><matrix value="$spot_frame"/></transform>',
+    '<transform name="to_world"><matrix value="$spot_frame"/></transform>'
+    '<texture type="bitmap" name="texture"><string name="filename" value="$slide"/></texture>')
+
+
+def test_spot_texture_edits_render_what_the_file_renders(device, maps):
+    """The spot's projection texture gives its own keys under `texture` (Mitsuba's name), and an
+    edit of its texels renders bit for bit what loading the other image renders."""
+    write_image(maps / "slide_a.exr", 0.5 * sky(4, 6))
+    write_image(maps / "slide_b.exr", 0.25 * sky(4, 6)[::-1])
+    scene = volcl.load_string(SLIDE_SCENE, base_dir=maps, slide="slide_a.exr")
+    params = volcl.traverse(scene)
+    assert {"lamp.texture.data", "lamp.texture.to_uv"} <= set(params)
+    original = volcl.render(scene, seed=3, device=device)
+    other = volcl.load_string(SLIDE_SCENE, base_dir=maps, slide="slide_b.exr")
+    params["lamp.texture.data"] = other.model.emitters[1].texture.data
+    update = params.update()
+    assert "texels" in update.arrays and "env_data" not in update.arrays
+    edited = volcl.render(scene, seed=3, device=device)
+    assert same(edited, volcl.render(other, seed=3, device=device))
+    assert not np.array_equal(edited.image, original.image), "the edit changed nothing"

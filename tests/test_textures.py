@@ -20,6 +20,8 @@ from volcl.pack_materials import MaterialPacker
 from volcl.scene import load_string
 from volcl.scene.model import Bsdf, Texture, rgb
 
+pytestmark = pytest.mark.every_implementation
+
 f32 = np.float32
 LUM = np.array([0.212671, 0.715160, 0.072169])
 

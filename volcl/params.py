@@ -371,7 +371,7 @@ def _medium_params(scene: ModelScene, m: Medium, prefix: str):
                 lambda: np.zeros(3) if m.radiance is None else np.array(m.radiance, np.float64), put_radiance)
 
 
-def _emitter_params(scene: ModelScene, e: Emitter, prefix: str):
+def _emitter_params(scene: ModelScene, e: Emitter, prefix: str, named=None):
     owner = _owner(f"<emitter type=\"{e.kind}\">", e, "emitter")
     if e.kind == "envmap":
         yield from _envmap_params(e, prefix, owner)
@@ -385,6 +385,9 @@ def _emitter_params(scene: ModelScene, e: Emitter, prefix: str):
                 ("lights",), owner)
     if e.kind == "spot":
         yield from _spot_params(e, prefix, owner)
+        if e.texture is not None:       # packed with the bsdfs' textures (volcl.pack.Packer)
+            named = {} if named is None else named
+            yield from _texture_params(e.texture, named.get(id(e.texture)) or f"{prefix}.texture", named)
     elif e.kind == "point":
         def put_position(p):
             e.position = p
@@ -538,7 +541,7 @@ def collect(scene: ModelScene) -> dict:
                 if prefix:
                     add(PARAMETERS[Medium](scene, m, prefix))
     for i, e in enumerate(scene.emitters):
-        add(PARAMETERS[Emitter](scene, e, name(e, f"emitter_{i}")))
+        add(PARAMETERS[Emitter](scene, e, name(e, f"emitter_{i}"), textures))
     for i, m in enumerate(scene.media):
         prefix = name(m, f"medium_{i}")
         if prefix:
@@ -551,6 +554,9 @@ def _all_textures(scene: ModelScene):
         for b in chain(s.bsdf):
             for t in textures_of(b):
                 yield from texture_tree(t)
+    for e in scene.emitters:
+        if e.texture is not None:
+            yield from texture_tree(e.texture)
 
 
 def _objects(scene: ModelScene):
