@@ -3,7 +3,7 @@ and its scene memory.
 
     python benchmarks/render_throughput.py [--scenes scenes/*.xml] [--size 128x128] [--spp 128]
         [--rounds 2] [--max-depth D] [--mitsuba-python PATH] [--variant llvm_ad_rgb]
-        [--skip-build] [--mesh-triangles 1000000] [-D name=value ...]
+        [--skip-build] [--mesh-triangles 1000000] [--noise] [-D name=value ...]
 
 Prints, in Markdown:
 
@@ -23,6 +23,11 @@ Prints, in Markdown:
   "CPU s" is the process's CPU time over all its threads (both renderers use every core), which
   load from other processes on the machine disturbs less. "volcl/Mitsuba" is Mitsuba's time over
   volcl's: above 1 volcl is faster.
+* With --noise, time to equal error: the render-alone CPU seconds each renderer needs for a 1%
+  relative RMS error (relative_noise: from the difference of the render-alone image and a second
+  render at seed + 1), per pixel and over 4x4-pixel blocks; for volcl with its default estimator
+  and, where that samples equiangularly, with equiangular sampling off. A default estimator that
+  does more per sample is judged here, not by samples/s.
 * Kernel build: seconds for clBuildProgram of the render program (Renderer.build_seconds) and the
   extra time of the first 1-spp pass over a second one (PoCL compiles the work-group function
   lazily at the first launch), each in a fresh Python process: "cold" with empty pyopencl/PoCL
@@ -120,12 +125,42 @@ def volcl_renderer(path, defines, size, seed, device):
     return r
 
 
-def volcl_render_alone(r, spp):
-    """(wall seconds, CPU seconds, invalid samples) of one render of spp samples per pixel."""
+def volcl_render_alone(r, spp, images=None):
+    """(wall seconds, CPU seconds, invalid samples) of one render of spp samples per pixel; the
+    image goes to images[r.seed] when given."""
     r.reset()
     c0 = cpu_seconds()
     res = r.render(spp)
+    if images is not None:
+        images[r.seed] = res.image
     return res.seconds, cpu_seconds() - c0, res.invalid
+
+
+def relative_noise(a, b, block=1):
+    """Relative mean squared error of one render from two renders with independent seeds: the
+    mean over pixels and channels of (a - b)^2 / 2 (each image's variance about its expectation),
+    over the image's squared mean; with block > 1, of the images' means over block x block
+    squares. Bias is not in it: both renderers agree with their references
+    (tests/test_mitsuba_agreement.py); what this compares is how much noise a second of each buys.
+    Per pixel, a renderer that splats each sample into several pixels through the filter (Mitsuba)
+    shows less variance than one that samples the filter (volcl: each sample lands in one pixel)
+    for the same information; over blocks a few filter radii wide that difference goes."""
+    a, b = np.asarray(a, np.float64)[..., :3], np.asarray(b, np.float64)[..., :3]
+    if block > 1:
+        h, w = (a.shape[0] // block) * block, (a.shape[1] // block) * block
+        shrink = lambda x: x[:h, :w].reshape(h // block, block, w // block, block, 3).mean((1, 3))  # noqa: E731
+        a, b = shrink(a), shrink(b)
+    mean = 0.5 * (a.mean() + b.mean())
+    return float(((a - b) ** 2).mean() / 2 / max(mean, 1e-30) ** 2)
+
+
+NOISE_BLOCK = 4
+
+
+def seconds_to_error(seconds, rel_mse, target=0.01):
+    """Time a render needs for a relative RMS error of `target`: its time times rel_mse /
+    target^2 (the mean squared error of an unbiased estimate falls as 1 / samples)."""
+    return seconds * rel_mse / target ** 2
 
 
 def whole_process(cmd, cwd):
@@ -234,8 +269,9 @@ def memory_row(label, renderer):
             f"{renderer.packed.bvh_seconds:.2f}"]
 
 
-def _measure(kind, path, defs, args, mts, device, renderers, tmp, warmup):
-    """One measurement: (wall s, CPU s[, invalid samples])."""
+def _measure(kind, path, defs, args, mts, device, renderers, tmp, warmup, images=None):
+    """One measurement: (wall s, CPU s[, invalid samples]); the render-alone images, when `images`
+    is given, go to images[(scene name, renderer)][seed]."""
     out = tmp / f"{path.stem}.{kind.split()[0]}.exr"
     size = tuple(int(x) for x in args.size.lower().split("x"))
     if kind == "volcl whole":
@@ -249,12 +285,74 @@ def _measure(kind, path, defs, args, mts, device, renderers, tmp, warmup):
             renderers[path] = volcl_renderer(path, defs, size, args.seed, device)
         if warmup:
             return None
-        return volcl_render_alone(renderers[path], args.spp)
+        return volcl_render_alone(renderers[path], args.spp,
+                                  None if images is None else images.setdefault((path.name, "volcl"), {}))
     if warmup:
         return None
-    res = mitsuba_ref.render_mitsuba(str(path), None, mts["python"], args.variant, args.spp, args.seed,
-                                     dict(defs, width=str(size[0]), height=str(size[1])), 1, details=True)
+    out = tmp / f"{path.stem}.mitsuba_render.exr" if images is not None else None
+    res = mitsuba_ref.render_mitsuba(str(path), str(out) if out else None, mts["python"], args.variant, args.spp,
+                                     args.seed, dict(defs, width=str(size[0]), height=str(size[1])), 1, details=True)
+    if out:
+        images.setdefault((path.name, "Mitsuba"), {})[args.seed] = read_exr(out)
     return res["seconds"], res["cpu_seconds"]
+
+
+def read_exr(path):
+    from volcl.image import read_image
+    return read_image(path)[0]
+
+
+def noise_rows(scenes, defines, args, mts, device, best, images, tmp):
+    """Time to 1% relative RMS error, from the render-alone images (seed args.seed) and one more
+    render of each at seed args.seed + 1: volcl's default estimator, volcl with equiangular
+    sampling off where the default uses it, and Mitsuba. Seconds are render-alone CPU seconds (the
+    best of the rounds; the extra estimator's from its own single render)."""
+    from volcl.estimator import Estimator
+    from volcl.renderer import Renderer
+    size = tuple(int(x) for x in args.size.lower().split("x"))
+    rows = []
+    for path in scenes:
+        defs = dict(defines)
+        cells = {}
+        v = best.get((path.name, "volcl render"))
+        imgs = images.get((path.name, "volcl"), {})
+        if v and args.seed in imgs:
+            log(f"noise: {path.name}: volcl, seed {args.seed + 1} ...")
+            other = volcl_renderer(path, defs, size, args.seed + 1, device)
+            volcl_render_alone(other, args.spp, imgs)
+            cells["volcl"] = [seconds_to_error(v["cpu"], relative_noise(imgs[args.seed], imgs[args.seed + 1], blk))
+                              for blk in (1, NOISE_BLOCK)]
+            if other.estimator.uses_equiangular(other.scene, other.packed.features):
+                log(f"noise: {path.name}: volcl, equiangular off ...")
+                off = {}
+                cpu_off = None
+                for seed in (args.seed, args.seed + 1):
+                    scene = load_scene(path, defs)
+                    scene.camera.width, scene.camera.height = size
+                    r = Renderer(scene, device=device, seed=seed, estimator=Estimator(equiangular="off"))
+                    r.render(1)
+                    c = volcl_render_alone(r, args.spp, off)[1]
+                    cpu_off = c if cpu_off is None else cpu_off
+                cells["volcl eq off"] = [seconds_to_error(cpu_off, relative_noise(off[args.seed], off[args.seed + 1], blk))
+                                         for blk in (1, NOISE_BLOCK)]
+        m = best.get((path.name, "Mitsuba render"))
+        mimgs = images.get((path.name, "Mitsuba"), {})
+        if m and args.seed in mimgs:
+            log(f"noise: {path.name}: Mitsuba, seed {args.seed + 1} ...")
+            out = tmp / f"{path.stem}.mitsuba_noise.exr"
+            try:
+                mitsuba_ref.render_mitsuba(str(path), str(out), mts["python"], args.variant, args.spp, args.seed + 1,
+                                           dict(defs, width=str(size[0]), height=str(size[1])), 1, details=True)
+                again = read_exr(out)
+                cells["Mitsuba"] = [seconds_to_error(m["cpu"], relative_noise(mimgs[args.seed], again, blk))
+                                    for blk in (1, NOISE_BLOCK)]
+            except mitsuba_ref.MitsubaError as exc:
+                log(str(exc))
+        fmt = lambda k: " / ".join(f"{x:.3g}" for x in cells[k]) if k in cells else "–"   # noqa: E731
+        ratio = (" / ".join(f"{m_ / v_:.2f}" for m_, v_ in zip(cells["Mitsuba"], cells["volcl"]))
+                 if "Mitsuba" in cells and "volcl" in cells else "–")
+        rows.append([path.name, fmt("volcl"), fmt("volcl eq off"), fmt("Mitsuba"), ratio])
+    return rows
 
 
 # ------------------------------------------------------------------------------------ main
@@ -272,6 +370,8 @@ def main(argv=None):
     p.add_argument("--mesh-triangles", type=int, default=1_000_000,
                    help="triangles of the synthetic mesh for the memory table (0: skip)")
     p.add_argument("--skip-build", action="store_true", help="skip the kernel build measurements")
+    p.add_argument("--noise", action="store_true",
+                   help="also time to 1%% relative RMS error (one more render of each at seed + 1)")
     p.add_argument("-D", "--define", action="append", metavar="NAME=VALUE",
                    help="scene parameter for both renderers")
     mitsuba_ref.add_argument(p)
@@ -304,6 +404,8 @@ def main(argv=None):
     # throughput: per scene, per round, the four measurements interleaved
     best = {}
     renderers = {}
+    images = {}
+    noise = None
     with tempfile.TemporaryDirectory(prefix="volcl-throughput-") as tmp:
         for rnd in range(-1, args.rounds):          # round -1 warms every cache, untimed
             for path in scenes:
@@ -313,7 +415,8 @@ def main(argv=None):
                 for kind in kinds:
                     log(f"round {rnd + 1}: {path.name}: {kind} ...")
                     try:
-                        r = _measure(kind, path, defs, args, mts, device, renderers, Path(tmp), rnd < 0)
+                        r = _measure(kind, path, defs, args, mts, device, renderers, Path(tmp), rnd < 0,
+                                     images if args.noise else None)
                     except (RuntimeError, mitsuba_ref.MitsubaError) as exc:
                         log(str(exc))
                         r = None
@@ -324,6 +427,9 @@ def main(argv=None):
                     b["wall"], b["cpu"] = min(b["wall"], r[0]), min(b["cpu"], r[1])
                     b["invalid"] = max(b["invalid"], r[2] if len(r) > 2 else 0)
                     best[(path.name, kind)] = b
+        if args.noise:
+            renderers.clear()
+            noise = noise_rows(scenes, defines, args, mts, device, best, images, Path(tmp))
     rows = []
     for path in scenes:
         row = [path.name]
@@ -349,6 +455,15 @@ def main(argv=None):
                  "Mitsuba render s (wall / CPU)", "volcl/Mitsuba render (wall / CPU)",
                  "volcl M samples/s", "Mitsuba M samples/s"], rows))
     print()
+    if noise:
+        print(f"## Time to 1% relative RMS error ({width}x{height}, from two {args.spp}-spp renders per column)\n")
+        print("Render-alone CPU seconds times the relative mean squared error (from the difference of two "
+              "renders with independent seeds) over 1e-4, per pixel / over the means of "
+              f"{NOISE_BLOCK}x{NOISE_BLOCK} blocks; lower is better. \"volcl/Mitsuba\" is Mitsuba's "
+              "time over volcl's default's. A few fireflies in one of the two renders move a figure a lot.\n")
+        print(table(["scene", "volcl default CPU s (pixel / block)", "volcl equiangular off CPU s",
+                     "Mitsuba CPU s", "volcl/Mitsuba"], noise))
+        print()
 
     # kernel build
     if not args.skip_build:

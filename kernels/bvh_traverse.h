@@ -6,6 +6,28 @@
  * OpenCL C has no recursion, so the top level (whose leaves hold instances) and a shape group's
  * tree are two functions from this one text. */
 
+#define VOLCL_TRAVERSE_CAT2(a, b) a##b
+#define VOLCL_TRAVERSE_CAT(a, b) VOLCL_TRAVERSE_CAT2(a, b)
+#define VOLCL_TRAVERSE_LEAVES VOLCL_TRAVERSE_CAT(VOLCL_TRAVERSE_NAME, _leaves)
+
+/* The packets of leaf reference ref (< 0) against the query: 0, 1 or 2 as the traversal returns. */
+__attribute__((always_inline))
+inline int VOLCL_TRAVERSE_LEAVES(const SceneData *sc, int ref, const Shear *sh, float3 o, float3 d, int mode,
+                                 Hit *hit) {
+    int leaf = ~ref;
+    int first = leaf >> 4, end = first + (leaf & 15) + 1;
+    int found = 0;
+    for (int i = first; i < end; ++i) {
+        __global const LeafPacket *pk = &sc->leaves[i];
+        int h = packet_triangles_intersect(pk, sh, hit->t, mode, hit);
+        if (h == 2) return 2;
+        int ha = VOLCL_TRAVERSE_LEAF(sc, pk, o, d, mode, hit);
+        if (ha == 2) return 2;
+        found |= h | ha;
+    }
+    return found != 0;
+}
+
 /* The traversal keeps a stack of (child, entry distance). At a node every child box the ray enters
  * goes on the stack; for closest hits they are inserted in order of entry distance, nearest on top,
  * so the nearest is visited next and a hit found there culls the others when they come off the
@@ -14,6 +36,19 @@
  * bounds the stack depth any ray can reach by VOLCL_BVH_STACK (volcl/bvh_wide.py). An empty scene is one node without children, which no ray enters. */
 inline int VOLCL_TRAVERSE_NAME(const SceneData *sc, int root, float3 o, float3 d, float tmax, int mode, Hit *hit) {
     Shear sh = shear_make(o, d);
+    hit->t = tmax;
+    hit->prim = 0;
+    hit->b1 = hit->b2 = 0.0f;
+#if VOLCL_HAS_INSTANCES
+    hit->inst = -1;
+#endif
+    /* A tree that is one leaf (a scene or group of a few primitives): its packets without the box
+     * test and the stack. Slots of a node are filled first to last and no node refers to the top
+     * root (0), so child[1] == 0 says this root has one child. The box test culls nothing the
+     * primitives' own tests would not, so the hit is the same. */
+    __global const BvhWideNode *rn = &sc->nodes[root];
+    if (rn->child[0] < 0 && rn->child[1] == 0) return VOLCL_TRAVERSE_LEAVES(sc, rn->child[0], &sh, o, d, mode, hit);
+    int ref = root;         /* the node or leaf visited now: the root first */
     /* a zero direction component becomes a tiny one of the same sign: its slab then spans
      * +-1e30 instead of producing 0 * INF = NaN for an origin on the slab plane */
     float3 inv_d = 1.0f / select(d, copysign((float3)(1e-30f), d), fabs(d) < (float3)(1e-30f));
@@ -21,14 +56,7 @@ inline int VOLCL_TRAVERSE_NAME(const SceneData *sc, int root, float3 o, float3 d
     int stack[VOLCL_BVH_STACK];
     float stack_t[VOLCL_BVH_STACK];
     int top = 0;
-    int ref = root;         /* the node or leaf visited now: the root first */
     bool found = false;
-    hit->t = tmax;
-    hit->prim = 0;
-    hit->b1 = hit->b2 = 0.0f;
-#if VOLCL_HAS_INSTANCES
-    hit->inst = -1;
-#endif
     for (;;) {
         if (ref >= 0) {
             __global const BvhWideNode *n = &sc->nodes[ref];
@@ -65,16 +93,9 @@ inline int VOLCL_TRAVERSE_NAME(const SceneData *sc, int root, float3 o, float3 d
                 continue;
             }
         } else {
-            int leaf = ~ref;
-            int first = leaf >> 4, end = first + (leaf & 15) + 1;
-            for (int i = first; i < end; ++i) {
-                __global const LeafPacket *pk = &sc->leaves[i];
-                int h = packet_triangles_intersect(pk, &sh, hit->t, mode, hit);
-                if (h == 2) return 2;
-                int ha = VOLCL_TRAVERSE_LEAF(sc, pk, o, d, mode, hit);
-                if (ha == 2) return 2;
-                found |= (h | ha) != 0;
-            }
+            int h = VOLCL_TRAVERSE_LEAVES(sc, ref, &sh, o, d, mode, hit);
+            if (h == 2) return 2;
+            found |= h != 0;
         }
         /* next from the stack, skipping entries whose box the ray enters beyond the closest hit */
         do {
@@ -87,3 +108,4 @@ inline int VOLCL_TRAVERSE_NAME(const SceneData *sc, int root, float3 o, float3 d
 
 #undef VOLCL_TRAVERSE_NAME
 #undef VOLCL_TRAVERSE_LEAF
+#undef VOLCL_TRAVERSE_LEAVES

@@ -250,6 +250,12 @@ typedef struct {
     int tech;
     float3 o, d, beta;  /* the segment and the throughput entering it */
     float t_seg;
+    /* the equiangular interval towards light seg_light (-1: none set up yet; seg_ok: whether it
+     * has one), kept for the distance sample's weight, which needs the same one when NEE there
+     * picks the same light: set up once, it costs one atan2 per segment instead of two */
+    int seg_light;
+    bool seg_ok;
+    EquiangularSegment seg;
 } EquiangularSegmentState;
 
 /* Density of the distance medium_sample_distance (media.h) draws for throughput beta, at t inside
@@ -277,7 +283,11 @@ inline float equiangular_distance_weight(const SceneData *sc, const EquiangularS
                                          __global const Medium *m, const LightSample *ls, float t) {
     if (es->tech == EQ_NONE || !light_is_point_like(sc->lights[ls->light].type)) return 1.0f;
     if (es->tech == EQ_ONLY_EQUIANGULAR) return 0.0f;
-    float pdf_e = sample_equiangular_pdf(es->o, es->d, es->t_seg, vload_f3(sc->lights[ls->light].position), t);
+    float pdf_e;
+    if (ls->light == es->seg_light)
+        pdf_e = es->seg_ok ? equiangular_segment_pdf(&es->seg, t) : 0.0f;
+    else
+        pdf_e = sample_equiangular_pdf(es->o, es->d, es->t_seg, vload_f3(sc->lights[ls->light].position), t);
     float pdf_d = medium_distance_pdf(m, es->beta, t);
     if (es->tech == EQ_ONLY_DISTANCE) return 2.0f * power_heuristic(pdf_d, pdf_e);
     if (!sc->params->mis) return pdf_e > 0.0f ? 0.0f : 1.0f;
@@ -295,6 +305,8 @@ inline EquiangularSegmentState equiangular_begin(const SceneData *sc, Rng *rng, 
     es.d = d;
     es.beta = beta;
     es.t_seg = t_seg;
+    es.seg_light = -1;
+    es.seg_ok = false;
     /* the vertex would be depth + 1: the same limit the distance-sampled vertex obeys */
     if (rp->equiangular == EQUIANGULAR_OFF || !do_nee || m->type != MEDIUM_HOMOGENEOUS
         || (rp->max_depth >= 0 && depth + 1 >= rp->max_depth))
@@ -306,7 +318,7 @@ inline EquiangularSegmentState equiangular_begin(const SceneData *sc, Rng *rng, 
 }
 
 /* The equiangular sample's estimate of D_k for the light it picks, before the factor beta. */
-inline float3 equiangular_direct(const SceneData *sc, Rng *rng, const EquiangularSegmentState *es,
+inline float3 equiangular_direct(const SceneData *sc, Rng *rng, EquiangularSegmentState *es,
                                  __global const Medium *m, int medium, uint *cutoffs) {
     if (es->tech != EQ_BOTH && es->tech != EQ_ONLY_EQUIANGULAR) return (float3)(0.0f);
     int count = sc->params->light_count;
@@ -317,7 +329,9 @@ inline float3 equiangular_direct(const SceneData *sc, Rng *rng, const Equiangula
     if (!light_is_point_like(l->type)) return (float3)(0.0f);   /* other lights: NEE at the distance sample */
     float3 lp = vload_f3(l->position);
     float t, pdf_e;
-    if (!sample_equiangular(es->o, es->d, es->t_seg, lp, u, &t, &pdf_e)) return (float3)(0.0f);
+    es->seg_light = li;
+    es->seg_ok = equiangular_segment(es->o, es->d, es->t_seg, lp, &es->seg);
+    if (!es->seg_ok || !equiangular_segment_sample(&es->seg, u, &t, &pdf_e)) return (float3)(0.0f);
     float3 x = es->o + t * es->d;
     float3 v = lp - x;
     float d2 = dot(v, v);

@@ -1,6 +1,7 @@
 """The Python API: loading, rendering, editing parameters with traverse() + update(), tiles, devices
 and their program caches, results in notebooks and on disk."""
 import io
+import os
 import re
 import subprocess
 import sys
@@ -465,3 +466,18 @@ def test_a_scene_pickles_without_its_uploads_and_renders_the_same(device):
     copy = pickle.loads(pickle.dumps(scene))
     assert copy.devices == [] and scene.devices == [device]
     assert same(volcl.render(copy, seed=5, device=device), first)
+
+
+def test_the_package_imports_what_it_names_when_first_used():
+    """`import volcl` and the command's module load neither numpy nor pyopencl (start-up of
+    commands that need neither, and OpenBLAS's thread count set before numpy loads); every name in
+    volcl.__all__ still resolves, and volcl.tiles stays the function after its module loads."""
+    code = ("import os, sys; import volcl.cli, volcl; "
+            "assert 'numpy' not in sys.modules and 'pyopencl' not in sys.modules, sorted(sys.modules); "
+            "assert os.environ['OPENBLAS_NUM_THREADS'] == '1'; "
+            "missing = [n for n in volcl.__all__ if not hasattr(volcl, n)]; assert not missing, missing; "
+            "import volcl.tiles; from volcl.tiles import tiles; assert volcl.tiles is tiles; "
+            "assert callable(volcl.render) and volcl.Renderer.__module__ == 'volcl.renderer'")
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    assert proc.returncode == 0, proc.stderr

@@ -60,3 +60,61 @@ def test_check_fits_names_the_buffer():
 def test_a_normal_scene_fits_the_real_device(device):
     r = Renderer(furnace(0.5), device=device)
     assert np.isfinite(r.render(1).image).all()
+
+
+def _counting_checks(monkeypatch, ok=True):
+    """Fake build check and self-test that count their calls (the real ones are tested elsewhere)."""
+    from volcl import selftest
+    calls = []
+    monkeypatch.setattr(devmod, "kernels_build", lambda d: (calls.append("build") or (True, "")))
+    monkeypatch.setattr(selftest, "run", lambda d: (calls.append("self-test")
+                                                    or selftest.SelfTest(ok, "ok" if ok else "furnace off", 0.0)))
+    return calls
+
+
+def _real_device():
+    return next(d for d in devmod.list_devices() if not devmod.is_simulator(d))
+
+
+def test_a_passed_check_is_trusted_by_later_processes(monkeypatch, tmp_path):
+    """What a later process does: a fresh Device object for the same driver skips the build check
+    and the self-test once one passed; VOLCL_DEVICE_CHECK=always checks again."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    monkeypatch.delenv("VOLCL_DEVICE_CHECK", raising=False)
+    calls = _counting_checks(monkeypatch)
+    dev = _real_device()
+    assert devmod.check(dev.fresh()) == (True, "") and calls == ["build", "self-test"]
+    assert (tmp_path / "volcl" / "trusted.json").is_file()
+    assert devmod.check(dev.fresh()) == (True, "") and calls == ["build", "self-test"]
+    monkeypatch.setenv("VOLCL_DEVICE_CHECK", "always")
+    assert devmod.check(dev.fresh()) == (True, "") and calls == ["build", "self-test"] * 2
+
+
+def test_a_failed_check_is_not_remembered(monkeypatch, tmp_path):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    monkeypatch.delenv("VOLCL_DEVICE_CHECK", raising=False)
+    calls = _counting_checks(monkeypatch, ok=False)
+    dev = _real_device()
+    for _ in range(2):
+        ok, why = devmod.check(dev.fresh())
+        assert not ok and "self-test failed: furnace off" in why
+    assert calls == ["build", "self-test"] * 2
+
+
+def test_the_trust_key_changes_with_the_driver_and_the_kernels(monkeypatch):
+    from volcl import program, trusted
+    platform = SimpleNamespace(version="OpenCL 3.0 PoCL 5.0")
+    cl_dev = SimpleNamespace(name="cpu", vendor="v", version="OpenCL 3.0", driver_version="5.0", platform=platform)
+    dev = SimpleNamespace(device=cl_dev, platform_name="Portable Computing Language")
+    keys = {trusted.key(dev)}
+    cl_dev.driver_version = "5.1"
+    keys.add(trusted.key(dev))
+    platform.version = "OpenCL 3.0 PoCL 5.1"
+    keys.add(trusted.key(dev))
+    cl_dev.name = "another cpu"
+    keys.add(trusted.key(dev))
+    monkeypatch.setattr(program, "sources_hash", lambda: "0123456789abcdef")
+    keys.add(trusted.key(dev))
+    monkeypatch.setenv("VOLCL_BUILD_OPTIONS", "-cl-opt-disable")
+    keys.add(trusted.key(dev))
+    assert len(keys) == 6

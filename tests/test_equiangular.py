@@ -237,3 +237,32 @@ def test_feature_flag_follows_the_choice_and_the_scene():
     assert Estimator(equiangular="on").resolve(outside)[0]["EQUIANGULAR"]
     inside = scene([ball], [Emitter("point", rgb(1.0), position=np.array([0.2, 0.1, -3.0]))])
     assert detect(inside)["EQUIANGULAR"]
+
+
+def _ulps(got, want):
+    """Error of float32 results in units of the last place of the float64 answer."""
+    want32 = np.abs(want).astype(np.float32)
+    ulp = np.spacing(np.maximum(want32, np.finfo(np.float32).tiny)).astype(np.float64)
+    return np.abs(got.astype(np.float64) - want) / ulp
+
+
+def test_short_range_math_is_within_two_ulps(cl_env, prog):
+    """The sampler's own atan2 (angles in (0, pi)) and sincos (on [0, pi]) against float64, over
+    ratios from 1e-6 to 1e6 on both sides of the y axis and angles across the whole range: the
+    density they give stays the one the pdf states to float32 precision."""
+    rng = np.random.default_rng(7)
+    n = 1 << 16
+    ratio = 10.0 ** rng.uniform(-6, 6, n)
+    x = (np.where(rng.random(n) < 0.5, -1.0, 1.0) * rng.uniform(0.1, 10.0, n)).astype(np.float32)
+    y = (np.abs(x.astype(np.float64)) * ratio).astype(np.float32)
+    x[:4], y[:4] = 0.0, 1.0          # on the y axis: pi/2
+    phi = np.concatenate([np.float32([0.0, np.pi / 4, np.pi / 2, np.pi]),
+                          rng.uniform(0, np.pi, n - 4).astype(np.float32)])
+    a, s, c = run_kernel(cl_env, prog, "equiangular_math", n, [(np.float32, ())] * 3, inputs=[y, x, phi])
+    y64, x64, phi64 = y.astype(np.float64), x.astype(np.float64), phi.astype(np.float64)
+    assert _ulps(a, np.arctan2(y64, x64)).max() <= 2.0
+    # near a zero of sin or cos, an error of one ulp of the argument is the honest scale
+    floor = np.spacing(np.float32(np.pi)).astype(np.float64)
+    sin_err = np.abs(s - np.sin(phi64)) / np.maximum(np.spacing(np.abs(np.sin(phi64)).astype(np.float32)), floor)
+    cos_err = np.abs(c - np.cos(phi64)) / np.maximum(np.spacing(np.abs(np.cos(phi64)).astype(np.float32)), floor)
+    assert sin_err.max() <= 2.0 and cos_err.max() <= 2.0, (sin_err.max(), cos_err.max())

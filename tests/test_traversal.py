@@ -23,8 +23,8 @@ def random_scene(rng, n_tri=3000, n_sph=40):
 
 
 def upload_arrays(tris, sph_c, sph_r, opaque=None):
-    t = np.zeros(len(tris), layout.TRIANGLE)
-    t["p0"], t["p1"], t["p2"] = tris[:, 0], tris[:, 1], tris[:, 2]
+    t = np.zeros(max(len(tris), 1), layout.TRIANGLE)     # OpenCL has no empty buffers
+    t["p0"][:len(tris)], t["p1"][:len(tris)], t["p2"][:len(tris)] = tris[:, 0], tris[:, 1], tris[:, 2]
     t["normals"] = -1
     s = np.zeros(max(len(sph_c), 1), layout.SPHERE)
     s["center"][:len(sph_c)], s["radius"][:len(sph_c)] = sph_c, sph_r
@@ -136,3 +136,34 @@ def test_closed_mesh_does_not_leak_through_shared_edges(cl_env, test_program):
     t_dev, _, _, _ = run_kernel(cl_env, prog, "trace_rays", len(o), OUTPUTS,
                              inputs=[nodes, leaves, t_arr, s_arr, o.astype(np.float32), d.astype(np.float32)])
     assert np.isfinite(t_dev).all(), f"{(~np.isfinite(t_dev)).sum()} rays escaped the closed box"
+
+
+@pytest.mark.parametrize("n_tri, n_sph", [(2, 1), (1, 3), (4, 0)])
+def test_a_tree_of_one_leaf_matches_brute_force(cl_env, test_program, n_tri, n_sph):
+    """Scenes of a few primitives, whose tree is one leaf the kernel tests without the box test:
+    closest hit, any hit and the shadow query against brute force."""
+    rng = np.random.default_rng(10 + n_tri + n_sph)
+    tris = rng.uniform(-1, 1, (n_tri, 1, 3)) + rng.normal(0, 0.6, (n_tri, 3, 3))
+    sph_c = rng.uniform(-0.7, 0.7, (n_sph, 3))
+    sph_r = rng.uniform(0.3, 0.6, n_sph)
+    opaque = np.arange(n_tri + n_sph) % 2 == 0
+    nodes, leaves, t_arr, s_arr = upload_arrays(tris.reshape(-1, 3, 3), sph_c, sph_r, opaque)
+    assert len(nodes) == 1 and nodes["child"][0, 0] < 0 and nodes["child"][0, 1] == 0
+    n = 2000
+    o = rng.uniform(-2, 2, (n, 3))
+    d = rng.uniform(-0.8, 0.8, (n, 3)) - o      # towards the primitives, mostly
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    prog = test_program("traversal_tests.cl")
+    t_dev, prim_dev, occ, shadow = run_kernel(
+        cl_env, prog, "trace_rays", n, OUTPUTS,
+        inputs=[nodes, leaves, t_arr, s_arr, o.astype(np.float32), d.astype(np.float32)])
+    t_ref, _, ambiguous, t_all = brute_force(tris.reshape(-1, 3, 3), sph_c, sph_r,
+                                             o.astype(np.float32).astype(np.float64),
+                                             d.astype(np.float32).astype(np.float64))
+    hit_ref, hit_dev = np.isfinite(t_ref), np.isfinite(t_dev)
+    assert hit_ref.sum() > n // 10, "the test scene should be hit by many rays"
+    assert not ((hit_ref != hit_dev) & ~ambiguous).any()
+    both = hit_ref & hit_dev & ~ambiguous
+    assert np.allclose(t_dev[both], t_ref[both], rtol=1e-4, atol=1e-5)
+    assert np.array_equal(occ.astype(bool), hit_dev)
+    assert np.array_equal(shadow != NO_HIT, hit_dev)

@@ -19,7 +19,9 @@ at most that many times (width - 1) entries plus width.
 
 Child references (int32): >= 0, a wide node index; < 0, a leaf, ~ref = (first << LEAF_COUNT_BITS)
 | (count - 1) for the primitive slots [first, first + count). Unused child slots carry an
-inverted box (+inf, -inf), which no ray enters.
+inverted box (+inf, -inf), which no ray enters, and child 0 (no node refers to the root); they
+come after the used ones, so a root whose slot 1 holds 0 has one child, and the kernel tests the
+primitives of a tree that is one leaf without the box test (kernels/bvh.h bvh_trace).
 """
 from __future__ import annotations
 

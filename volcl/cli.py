@@ -3,10 +3,16 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import time
 import warnings
 from pathlib import Path
+
+# numpy's OpenBLAS starts a thread per core when numpy is imported, which this command never uses
+# (its matrices are 4x4; the work is on the OpenCL device): one thread saves that start-up. Set
+# before numpy is first imported (volcl's package imports nothing heavy); a user's own setting wins.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from . import __version__
 from .errors import VolclError

@@ -30,3 +30,13 @@ VOLCL_KERNEL void equiangular_pdf(__global const float *cfg, __global const floa
     load_cfg(cfg, &o, &d, &light, &t_max);
     pdf[i] = sample_equiangular_pdf(o, d, t_max, light, t[i]);
 }
+
+/* The short-range atan2 and sincos of equiangular.h on given arguments. */
+VOLCL_KERNEL void equiangular_math(__global const float *y, __global const float *x, __global const float *phi,
+                                   __global float *atan2_out, __global float *sin_out, __global float *cos_out) {
+    int i = get_global_id(0);
+    atan2_out[i] = eq_atan2_upper(y[i], x[i]);
+    float c;
+    sin_out[i] = eq_sincos(phi[i], &c);
+    cos_out[i] = c;
+}
