@@ -412,3 +412,28 @@ def test_mask_passes_with_one_minus_opacity(cl_env, prog):
     np.testing.assert_allclose(s["eval_pdf"][d], 0.3 * s["wi"][d, 2] / np.pi, rtol=1e-5)
     np.testing.assert_allclose(s["value"][d], np.repeat(0.3 * 0.5 * s["wi"][d, 2:] / np.pi, 3, 1), rtol=1e-5)
     np.testing.assert_allclose(s["weight"][d], 0.5, rtol=1e-5)
+
+
+def test_roughplastic_tables_are_kept_between_processes(tmp_path, monkeypatch):
+    """The tables come back from the cache folder bit for bit; a damaged file is computed again."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    args = ("ggx", 0.3, 1.5)
+    fresh = microfacet._computed_tables(*args)
+    microfacet.roughplastic_tables.cache_clear()
+    first = microfacet.roughplastic_tables(*args)
+    path = microfacet._table_file(*args)
+    assert path.is_file()
+    microfacet.roughplastic_tables.cache_clear()
+    compute = microfacet._computed_tables
+    monkeypatch.setattr(microfacet, "_computed_tables", lambda *a: pytest.fail("the stored tables were not read"))
+    again = microfacet.roughplastic_tables(*args)
+    monkeypatch.setattr(microfacet, "_computed_tables", compute)
+    for got in (first, again):
+        np.testing.assert_array_equal(got[0], fresh[0])
+        assert got[1] == fresh[1]
+    path.write_bytes(b"not a table")
+    microfacet.roughplastic_tables.cache_clear()
+    damaged = microfacet.roughplastic_tables(*args)
+    np.testing.assert_array_equal(damaged[0], fresh[0])
+    assert damaged[1] == fresh[1]
+    microfacet.roughplastic_tables.cache_clear()

@@ -8,11 +8,17 @@
   fresnel_diffuse_reflectance: Egan and Hilgeman's fit below eta = 1, d'Eon and Irving's above).
 
 Written in float64 numpy; the visible-normal sampling here is the same construction the kernels
-use (kernels/microfacet.h), so the quadrature integrates what Mitsuba integrates.
+use (kernels/microfacet.h), so the quadrature integrates what Mitsuba integrates. A roughplastic
+table takes about a second (the 128 x 128 quadrature at 64 cosines), so each is kept in volcl's
+cache folder under a key of its parameters and this file's text, and read back bit for bit by
+later processes.
 """
 from __future__ import annotations
 
+import hashlib
+import os
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 from numpy.polynomial.legendre import leggauss
@@ -141,12 +147,39 @@ def _masked_lobe(kind: str, alpha: float, eta: float, transmit: bool) -> np.ndar
     return np.nan_to_num(value) @ w
 
 
+def _computed_tables(kind: str, alpha: float, eta: float) -> tuple[np.ndarray, float]:
+    table = _masked_lobe(kind, alpha, eta, transmit=True)
+    mu, _ = _directions()
+    internal = 2.0 * float(np.mean(_masked_lobe(kind, alpha, 1.0 / eta, transmit=False) * mu))
+    return table, internal
+
+
+def _table_file(kind: str, alpha: float, eta: float) -> Path:
+    base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "volcl" / "roughplastic"
+    source = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()
+    name = hashlib.sha256(f"{source} {kind} {float(alpha)!r} {float(eta)!r}".encode()).hexdigest()[:32]
+    return base / f"{name}.npy"
+
+
 @lru_cache(maxsize=64)
 def roughplastic_tables(kind: str, alpha: float, eta: float) -> tuple[np.ndarray, float]:
     """(external transmittance at cos = linspace(0, 1, 64) (Mitsuba floors the first at 1e-6),
     internal reflectance: 2 * mean(R(mu) mu) over the same cosines, with R the reflectance from
-    inside, relative IOR 1 / eta)."""
-    table = _masked_lobe(kind, alpha, eta, transmit=True)
-    mu, _ = _directions()
-    internal = 2.0 * float(np.mean(_masked_lobe(kind, alpha, 1.0 / eta, transmit=False) * mu))
+    inside, relative IOR 1 / eta). From the cache folder where an earlier process computed them;
+    a missing, unreadable or malformed file is computed again."""
+    path = _table_file(kind, alpha, eta)
+    try:
+        stored = np.load(path, allow_pickle=False)
+        if stored.shape == (TABLE_SIZE + 1,) and stored.dtype == np.float64 and np.isfinite(stored).all():
+            return stored[:-1].copy(), float(stored[-1])
+    except (OSError, ValueError):
+        pass
+    table, internal = _computed_tables(kind, alpha, eta)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npy")
+        np.save(tmp, np.append(np.asarray(table, np.float64), internal))
+        os.replace(tmp, path)
+    except OSError:
+        pass            # a read-only cache only costs the next process the computation
     return table, internal
