@@ -7,6 +7,7 @@ import pytest
 import trimesh
 
 from conftest import run_kernel
+from test_traversal import moller_trumbore
 from volcl.pack import Packer
 from volcl.scene import load_string
 
@@ -67,17 +68,7 @@ def _sphere_t(o, d, c, r):
 
 
 def _triangles_t(o, d, tris):
-    p0, e1, e2 = tris[:, 0], tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
-    pvec = np.cross(d[:, None, :], e2[None])
-    det = np.einsum("rtk,tk->rt", pvec, e1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = 1.0 / det
-        tvec = o[:, None, :] - p0[None]
-        u = np.einsum("rtk,rtk->rt", tvec, pvec) * inv
-        qvec = np.cross(tvec, e1[None])
-        v = np.einsum("rk,rtk->rt", d, qvec) * inv
-        t = np.einsum("tk,rtk->rt", e2, qvec) * inv
-    margin = np.minimum(np.minimum(u, v), 1 - u - v)
+    t, det, margin = moller_trumbore(o, d, tris)
     ok = (np.abs(det) > 1e-14) & (margin >= 0) & (t > 1e-7)
     return np.where(ok, t, np.inf), np.abs(margin)
 

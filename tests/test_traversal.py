@@ -35,9 +35,9 @@ def upload_arrays(tris, sph_c, sph_r, opaque=None):
     return nodes, leaves, t, s
 
 
-def brute_force(tris, sph_c, sph_r, o, d):
-    """Closest t per ray over all primitives (float64), with each triangle hit's barycentric margin."""
-    # triangles, Moller-Trumbore vectorized over rays x triangles
+def moller_trumbore(o, d, tris):
+    """Rays x triangles in float64: (t along each ray's plane crossing, the determinant, the
+    barycentric margin min(u, v, 1 - u - v), negative outside the triangle)."""
     p0, e1, e2 = tris[:, 0], tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
     pvec = np.cross(d[:, None, :], e2[None])
     det = np.einsum("rtk,tk->rt", pvec, e1)
@@ -49,6 +49,12 @@ def brute_force(tris, sph_c, sph_r, o, d):
         v = np.einsum("rk,rtk->rt", d, qvec) * inv
         t = np.einsum("tk,rtk->rt", e2, qvec) * inv
         margin = np.minimum(np.minimum(u, v), 1 - u - v)
+    return t, det, margin
+
+
+def brute_force(tris, sph_c, sph_r, o, d):
+    """Closest t per ray over all primitives (float64), with each triangle hit's barycentric margin."""
+    t, det, margin = moller_trumbore(o, d, tris)
     ok = (np.abs(det) > 1e-14) & (margin >= 0) & (t > 1e-9)
     t_tri = np.where(ok, t, np.inf)
     # spheres
