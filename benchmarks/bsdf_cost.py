@@ -25,7 +25,7 @@ ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 import mitsuba_ref  # noqa: E402
 import render_throughput  # noqa: E402
-from common import cpu_model  # noqa: E402
+from common import cpu_model, log  # noqa: E402
 
 TEXTURES = ROOT / "scenes" / "textures"
 
@@ -103,7 +103,7 @@ def measure(paths, args, mts, device):
     best = {}
     for rnd in range(args.rounds):
         for path in paths:
-            render_throughput.log(f"round {rnd + 1}: {path.name}")
+            log(f"round {rnd + 1}: {path.name}")
             r = render_throughput.volcl_renderer(path, {}, size, 0, device)
             _, cpu, invalid = render_throughput.volcl_render_alone(r, args.spp)
             del r
@@ -146,7 +146,7 @@ def main(argv=None):
     args = p.parse_args(argv)
     from volcl import device as devmod
     device = devmod.choose(args.device)
-    mts = mitsuba_ref.locate(args.mitsuba_python, args.variant, log=render_throughput.log)
+    mts = mitsuba_ref.locate(args.mitsuba_python, args.variant, log=log)
     names = args.bsdfs if "diffuse" in args.bsdfs else ["diffuse"] + args.bsdfs
     w, h = (int(x) for x in args.size.lower().split("x"))
     with tempfile.TemporaryDirectory(prefix="volcl-bsdf-cost-") as tmp:

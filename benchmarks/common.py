@@ -1,7 +1,13 @@
 """Small pieces the benchmark scripts share. Standard library only: mitsuba_ref.py imports this
 from inside the Python that has Mitsuba, which need not have volcl."""
 import platform
+import sys
 from pathlib import Path
+
+
+def log(msg):
+    """Progress for stderr (the tables go to stdout)."""
+    print(msg, file=sys.stderr, flush=True)
 
 
 def cpu_model() -> str:

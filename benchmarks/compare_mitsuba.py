@@ -36,15 +36,12 @@ ROOT = HERE.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(HERE))
 import mitsuba_ref  # noqa: E402
-from common import parse_defines  # noqa: E402
+from common import log, parse_defines  # noqa: E402
 
 DEFAULT_TOOL = ROOT.parent / "shared" / "tools" / "compare_renders.py"
 DEFAULT_SCENES = [ROOT / "scenes" / f"{name}.xml" for name in
                   ("cbox", "cloud_sky", "rough_glass_medium", "textured_cbox")]
 
-
-def log(msg):
-    print(msg, file=sys.stderr, flush=True)
 
 
 

@@ -40,10 +40,8 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(HERE))
 import compare_mitsuba  # noqa: E402
 import mitsuba_ref  # noqa: E402
+from common import log  # noqa: E402
 
-
-def log(msg):
-    print(msg, file=sys.stderr, flush=True)
 
 
 def timed_renders(scene, device, spp, repeat, variants, seed):

@@ -32,11 +32,8 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(HERE))
-from common import bumpy_sphere, cpu_model  # noqa: E402
+from common import bumpy_sphere, cpu_model, log  # noqa: E402
 
-
-def log(msg):
-    print(msg, file=sys.stderr, flush=True)
 
 
 def placements(n, rng):

@@ -34,14 +34,12 @@ ROOT = HERE.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(HERE))
 import mitsuba_ref  # noqa: E402
+from common import log  # noqa: E402
 
 DEFAULT_TOOL = ROOT.parent / "shared" / "tools" / "compare_renders.py"
 _INCLUDE = re.compile(r"<include\s+[^>]*filename\s*=\s*[\"']([^\"']+)[\"']")
 _COMMENT = re.compile(r"<!--.*?-->", re.S)
 
-
-def log(msg):
-    print(msg, file=sys.stderr, flush=True)
 
 
 @dataclass

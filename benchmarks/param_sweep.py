@@ -39,11 +39,8 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(HERE))
-from common import cpu_model  # noqa: E402
+from common import cpu_model, log  # noqa: E402
 
-
-def log(msg):
-    print(msg, file=sys.stderr, flush=True)
 
 
 def value_text(v: float) -> str:

@@ -67,11 +67,8 @@ ROOT = HERE.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(HERE))
 import mitsuba_ref  # noqa: E402
-from common import bumpy_sphere, cpu_model, parse_defines  # noqa: E402
+from common import bumpy_sphere, cpu_model, log, parse_defines  # noqa: E402
 
-
-def log(msg):
-    print(msg, file=sys.stderr, flush=True)
 
 
 

@@ -42,7 +42,7 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(HERE))
-from common import bumpy_sphere, cpu_model  # noqa: E402
+from common import bumpy_sphere, cpu_model, log  # noqa: E402
 
 NORI_CBOX = ROOT.parent / "shared" / "nori" / "cbox" / "cbox_path_mis.xml"
 KERNEL = HERE / "kernels" / "trace.cl"
@@ -53,9 +53,6 @@ def cpu_seconds():
     r = resource.getrusage(resource.RUSAGE_SELF)
     return r.ru_utime + r.ru_stime
 
-
-def log(msg):
-    print(msg, file=sys.stderr, flush=True)
 
 
 # ------------------------------------------------------------------------------------ scenes

@@ -26,11 +26,8 @@ ROOT = HERE.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "scenes"))
 sys.path.insert(0, str(ROOT / "tests"))      # scenebuild
-from common import cpu_model  # noqa: E402
+from common import cpu_model, log  # noqa: E402
 
-
-def log(msg):
-    print(msg, file=sys.stderr, flush=True)
 
 
 def make_grid(size: int, puff: int):
