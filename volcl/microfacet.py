@@ -154,10 +154,14 @@ def _computed_tables(kind: str, alpha: float, eta: float) -> tuple[np.ndarray, f
     return table, internal
 
 
+@lru_cache(maxsize=None)
+def _source_hash() -> str:
+    return hashlib.sha256(Path(__file__).read_bytes()).hexdigest()
+
+
 def _table_file(kind: str, alpha: float, eta: float) -> Path:
     base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "volcl" / "roughplastic"
-    source = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()
-    name = hashlib.sha256(f"{source} {kind} {float(alpha)!r} {float(eta)!r}".encode()).hexdigest()[:32]
+    name = hashlib.sha256(f"{_source_hash()} {kind} {float(alpha)!r} {float(eta)!r}".encode()).hexdigest()[:32]
     return base / f"{name}.npy"
 
 
