@@ -105,6 +105,7 @@ def main():
     print("| tile size | schedule | tasks | overhead per task | M samples/s |")
     print("|---:|---|---:|---:|---:|")
     for size in (64, 32, 16):
+        measure(scene, clients[2], 1, SCHEDULES["streamed"], tile_size=size)     # the tiles' renderers made
         for s in SCHEDULES:
             m = check(measure(scene, clients[2], args.spp, SCHEDULES[s], tile_size=size))
             print(f"| {size} | {s} | {m['tasks']} | {1e3 * m['overhead']:.1f} ms | {m['rate'] / 1e6:.3f} |")

@@ -425,13 +425,17 @@ inline int path_medium_event(const SceneData *sc, Rng *rng, PathState *ps, bool 
         float2 ul = rng_next_float2(rng);
         if (light_sample(sc, p, u_pick, ul, &ls) && max_component(ls.value) > 0.0f) {
             /* the phase value in the estimate, the phase sampler's pdf in the MIS weight */
-            float ph_pdf;
-            float ph = phase_eval_pdf(sc, m, ps->d, ls.wi, &ph_pdf);
-            float3 c = nee_contribution(sc, &ls, (float3)(ph), ph_pdf, p, ps->medium, rng, cutoffs);
+            /* the equiangular combination's weight first: where it is 0 (one-sample MIS chose the
+             * equiangular sample for this segment) the shadow ray would be traced for nothing */
+            float w_eq = 1.0f;
 #if VOLCL_HAS_EQUIANGULAR
-            c *= equiangular_distance_weight(sc, &es, m, &ls, ms.t);
+            w_eq = equiangular_distance_weight(sc, &es, m, &ls, ms.t);
 #endif
-            ps->L += ps->beta * c;
+            if (w_eq > 0.0f) {
+                float ph_pdf;
+                float ph = phase_eval_pdf(sc, m, ps->d, ls.wi, &ph_pdf);
+                ps->L += ps->beta * (w_eq * nee_contribution(sc, &ls, (float3)(ph), ph_pdf, p, ps->medium, rng, cutoffs));
+            }
         }
     }
 #if VOLCL_HAS_EMISSION_NEE

@@ -1,10 +1,11 @@
-/* Entry point: one launch renders one sample (or one slot of samples) for a range of pixels of a
- * tile.
+/* Entry point: one launch renders one sample (or one slot of samples, or `passes` rounds of the
+ * slots) for a range of pixels of a tile.
  *
  * A tile is the rectangle of the image tile_w pixels wide whose top left pixel is (tile_x, tile_y),
  * its tile_pixels pixels numbered row by row; the whole image is the tile (0, 0, width, height).
  * The accumulators hold `slots` rows of tile_pixels entries. Work item i handles tile pixel
- * first + (i % count) and sample index sample_base + i / count, writing its own accumulator slot,
+ * first + (i % count) and sample index sample_base + i / count (and, with passes > 1, the same slot
+ * of the next rounds: + slots, + 2 slots, ...), writing its own accumulator slot,
  * so tiny images still fill the device and the result never depends on how samples were grouped
  * into launches. Random streams and camera rays follow the pixel's place in the image, not in the
  * tile, so a pixel's samples are the same whatever tile renders it. Samples that come out NaN,
@@ -28,6 +29,38 @@
 #include "integrator.h"
 #include "direct.h"
 
+/* One sample of pixel (px, py) (index `pixel` in the image), added to accumulator entry `out`. */
+inline void render_sample(const SceneData *sc, __global const float *filter_table, int px, int py, int pixel,
+                          uint sample, int out, __global float4 *sums, __global float4 *sums_sq,
+                          __global uint *invalid, __global uint *cutoffs) {
+    __global const RenderParams *params = sc->params;
+    Rng rng = rng_init(params->seed, (uint)pixel, sample);
+    float3 o, d;
+    float t_max;
+    float2 u_pixel = rng_next_float2(&rng);
+    /* drawn only where a lens needs it, so other cameras keep their random sequences */
+#if VOLCL_HAS_THINLENS
+    float2 u_lens = rng_next_float2(&rng);
+#else
+    float2 u_lens = (float2)(0.0f);
+#endif
+    camera_ray(sc, filter_table, px, py, u_pixel, u_lens, &o, &d, &t_max);
+    uint cut = 0u;
+    float3 L;
+#if VOLCL_HAS_DIRECT
+    if (params->integrator == INTEGRATOR_DIRECT) L = direct_radiance(sc, &rng, o, d, t_max);
+    else
+#endif
+    L = integrator_radiance(sc, &rng, o, d, t_max, &cut);
+    if (cut) cutoffs[out] += cut;
+    if (isfinite(L.x) && isfinite(L.y) && isfinite(L.z) && L.x >= 0.0f && L.y >= 0.0f && L.z >= 0.0f) {
+        sums[out] += (float4)(L, 1.0f);
+        sums_sq[out] += (float4)(L * L, 0.0f);
+    } else {
+        invalid[out] += 1u;
+    }
+}
+
 VOLCL_KERNEL void render_pass(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
                           __global const Triangle *triangles, __global const TriangleNormals *normals,
                           __global const Sphere *spheres, __global const Cylinder *cylinders,
@@ -45,7 +78,7 @@ VOLCL_KERNEL void render_pass(__global const BvhWideNode *nodes, __global const 
                           __global float4 *sums, __global float4 *sums_sq, __global uint *invalid,
                           __global uint *cutoffs,
                           uint sample_base, int tile_x, int tile_y, int tile_w, int tile_pixels,
-                          int first, int count, int slots) {
+                          int first, int count, int slots, int passes) {
     int gid = (int)get_global_id(0);     /* launches stay below 2^31 work items (renderer.py) */
     if (gid >= count * slots) return;
     int slot = gid / count;
@@ -55,30 +88,10 @@ VOLCL_KERNEL void render_pass(__global const BvhWideNode *nodes, __global const 
     SceneData sc = {nodes, leaves, triangles, normals, spheres, cylinders, shapes, bsdfs, lights,
                     light_tri_cdf, light_tris, env_data, media, grids, grid_data, params, tri_uvs, uv_maps,
                     textures, texels, bsdf_tables, phase_lobes, phase_tables, instances};
-    Rng rng = rng_init(params->seed, (uint)pixel, sample_base + (uint)slot);
-    float3 o, d;
-    float t_max;
-    float2 u_pixel = rng_next_float2(&rng);
-    /* drawn only where a lens needs it, so other cameras keep their random sequences */
-#if VOLCL_HAS_THINLENS
-    float2 u_lens = rng_next_float2(&rng);
-#else
-    float2 u_lens = (float2)(0.0f);
-#endif
-    camera_ray(&sc, filter_table, px, py, u_pixel, u_lens, &o, &d, &t_max);
-    uint cut = 0u;
-    float3 L;
-#if VOLCL_HAS_DIRECT
-    if (params->integrator == INTEGRATOR_DIRECT) L = direct_radiance(&sc, &rng, o, d, t_max);
-    else
-#endif
-    L = integrator_radiance(&sc, &rng, o, d, t_max, &cut);
     int out = slot * tile_pixels + tp;
-    if (cut) cutoffs[out] += cut;
-    if (isfinite(L.x) && isfinite(L.y) && isfinite(L.z) && L.x >= 0.0f && L.y >= 0.0f && L.z >= 0.0f) {
-        sums[out] += (float4)(L, 1.0f);
-        sums_sq[out] += (float4)(L * L, 0.0f);
-    } else {
-        invalid[out] += 1u;
-    }
+    /* pass j adds sample sample_base + j * slots + slot: the additions to this slot come in the
+     * order separate launches would make them, so the sums have the same bits */
+    for (int j = 0; j < passes; ++j)
+        render_sample(&sc, filter_table, px, py, pixel, sample_base + (uint)(j * slots + slot), out,
+                      sums, sums_sq, invalid, cutoffs);
 }

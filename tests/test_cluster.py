@@ -76,6 +76,24 @@ def test_local_workers_render_on_their_share_of_the_cores(client):
         assert threads == want and all(u == int(want) for u in units), seen
 
 
+def test_local_workers_run_dask_quietly(client):
+    """local:N workers (and `volcl worker`, through the environment) start with Dask's periodic
+    work slowed or off (cluster.QUIET_DASK): it took CPU the renders needed."""
+    import dask
+
+    def config():
+        import dask
+        return {key: dask.config.get(key) for key in cluster.QUIET_DASK}
+    for seen in client.run(config).values():
+        assert seen == cluster.QUIET_DASK, seen
+    env = cluster.quiet_dask_env({"DASK_DISTRIBUTED__ADMIN__TICK__INTERVAL": "200ms"})
+    assert env["DASK_DISTRIBUTED__ADMIN__TICK__INTERVAL"] == "200ms"       # the user's own setting wins
+    parsed = dask.config.collect_env(env)
+    assert parsed["distributed"]["worker"]["profile"]["enabled"] is False
+    assert parsed["distributed"]["worker"]["memory"]["monitor_interval"] == "1s"
+    assert parsed["distributed"]["admin"]["system_monitor"]["interval"] == "2s"
+
+
 def test_checkpoints_pass_between_the_cluster_and_one_device(client, device):
     scene = volcl.load_file(SCENES / "cbox.xml", **SIZE)
     whole = volcl.render(scene, spp=40, seed=2, device=device)

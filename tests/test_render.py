@@ -66,6 +66,19 @@ def test_launch_size_does_not_change_the_image(small, device, reference, pixels)
     assert same(res, reference)
 
 
+@pytest.mark.parametrize("calls", [[100], [7, 93], [42, 58], [90, 10]])
+def test_advance_in_launches_of_several_rounds_is_bit_identical(small, device, reference, calls):
+    """advance() (the tiles of volcl.rounds) runs whole rounds of the slots several to a launch on a
+    device without a launch time budget, the partial rounds each in their own: the bits of render()."""
+    r = Renderer(small, device=device, seed=7)
+    for spp in calls:
+        r.advance(spp)
+    if device.kind != "gpu":
+        launches = {(100,): 2, (7, 93): 4, (42, 58): 3, (90, 10): 3}[tuple(calls)]    # (100,): 84 spp in one
+        assert r.launches == launches, r.launches
+    assert same(r.result(), reference)
+
+
 def test_state_restored_in_a_new_renderer_continues_bit_for_bit(small, device, reference):
     first = Renderer(small, device=device, seed=7)
     first.render(61)

@@ -91,7 +91,8 @@ def cmd_worker(args):
         import distributed  # noqa: F401
     except ImportError:
         raise VolclError("volcl worker needs Dask distributed: pip install 'volcl[cluster]'") from None
-    env = dict(os.environ)
+    from .cluster import quiet_dask_env
+    env = quiet_dask_env(os.environ)
     if args.device:
         env["VOLCL_DEVICE"] = args.device
     extra = list(args.dask_args)

@@ -47,6 +47,17 @@ CLUSTER_TILES_PER_WORKER = 4
 # and each task costs milliseconds.
 CLUSTER_ROUND_GROWTH = 16
 LOCAL = "local:"
+# Dask's periodic work that a render needs none of, slowed or off (Dask's own test suite runs
+# with the same): by default every scheduler, nanny and worker checks its event loop every 20 ms,
+# and workers sample their threads' stacks every 10 ms for the dashboard's profiles. On 2 cores
+# this took 5% of a core in the client (with the LocalCluster's scheduler and nannies) and 4% in
+# each idle worker, time a second worker could not render in; slowed, 1% and 0.4%.
+QUIET_DASK = {
+    "distributed.admin.tick.interval": "1s",
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.system-monitor.interval": "2s",
+    "distributed.worker.memory.monitor-interval": "1s",
+}
 # Times Dask runs a task again after an exception in it (a worker that dies is handled by Dask
 # itself, which moves the task; `distributed.scheduler.allowed-failures`).
 TASK_RETRIES = 2
@@ -89,7 +100,8 @@ def connect(scheduler):
             raise VolclError(f"--scheduler {scheduler!r}: expected local:N with N >= 1 worker processes")
         # The workers must outlive a Ctrl-C, which a terminal sends to the whole process group:
         # they start with SIGINT ignored (inherited), and the client alone decides what to do.
-        with _sigint_ignored():
+        import dask
+        with _sigint_ignored(), dask.config.set(QUIET_DASK):
             cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                                dashboard_address=":0", silence_logs=40, env=local_worker_env(n))
         # Results come straight from the workers, not through the scheduler (which shares this process).
@@ -104,6 +116,16 @@ def connect(scheduler):
     except OSError as exc:
         raise VolclError(f"--scheduler {scheduler}: cannot reach the Dask scheduler ({exc}); start one with "
                          "`dask scheduler` and workers with `volcl worker ADDRESS`") from None
+
+
+def quiet_dask_env(env: dict) -> dict:
+    """`env` with QUIET_DASK as Dask reads configuration from the environment (DASK_DISTRIBUTED__...),
+    for a `volcl worker` process; values the environment already sets win."""
+    out = dict(env)
+    for key, value in QUIET_DASK.items():
+        name = "DASK_" + "__".join(part.upper().replace("-", "_") for part in key.split("."))
+        out.setdefault(name, str(value))
+    return out
 
 
 def local_worker_env(n: int) -> dict:

@@ -149,9 +149,10 @@ class Renderer:
         (and equal seeds, features and kernel sources) compute the same samples."""
         return data_hash(self.params, self.packed)
 
-    def _launch(self, sample_base: int, slots: int, accum):
+    def _launch(self, sample_base: int, slots: int, accum, passes: int = 1):
         """Samples sample_base .. sample_base + slots - 1 of every pixel of the tile, into slots
-        0 .. slots - 1 of the accumulators `accum`, in launches of `launch_pixels` pixels."""
+        0 .. slots - 1 of the accumulators `accum`, in launches of `launch_pixels` pixels; with
+        passes > 1 (slots then all of them), that many whole rounds of the slots in each launch."""
         args = self.uploaded.args(self.params_buffer)
         t = self.tile
         first = 0
@@ -159,7 +160,7 @@ class Renderer:
             count = min(self.launch_pixels, self.npix - first)
             self.kernel.set_args(*args, *accum, np.uint32(sample_base), np.int32(t.x), np.int32(t.y),
                                  np.int32(t.width), np.int32(self.npix), np.int32(first), np.int32(count),
-                                 np.int32(slots))
+                                 np.int32(slots), np.int32(passes))
             t0 = time.perf_counter()
             items = -(-count * slots // self.group_items) * self.group_items
             event = cl.enqueue_nd_range_kernel(self.queue, self.kernel, (items,), (self.group_items,))
@@ -277,12 +278,22 @@ class Renderer:
 
     def advance(self, spp: int):
         """Add `spp` samples per pixel in passes, with no stopping rules and no read-back (the
-        tiles of a render on several devices advance so, volcl.rounds)."""
+        tiles of a render on several devices advance so, volcl.rounds). On a device without a
+        launch time budget (CPUs), whole rounds of the slots go several to a launch, up to
+        MAX_ITEMS samples: a small tile's pass is too short to pay a launch of its own (on PoCL's
+        CPU device a launch costs about half a millisecond, a 32x32 tile's pass a few)."""
         end = self.samples_done + spp
         while self.samples_done < end:
             t0 = time.perf_counter()
-            count = min(self.slots - self.samples_done % self.slots, end - self.samples_done)
-            self._pass(self.samples_done, count)
+            done = self.samples_done
+            count = min(self.slots - done % self.slots, end - done)
+            rounds = (end - done) // self.slots
+            if done % self.slots == 0 and rounds > 1 and not self.adaptive and self.launch_pixels >= self.npix:
+                passes = max(1, min(rounds, MAX_ITEMS // (self.slots * self.npix)))
+                self._launch(done, self.slots, (self.sums, self.sums_sq, self.invalid, self.cutoffs), passes)
+                count = passes * self.slots
+            else:
+                self._pass(done, count)
             self.queue.finish()
             self.samples_done += count
             self.seconds += time.perf_counter() - t0
