@@ -66,6 +66,22 @@ def test_launch_size_does_not_change_the_image(small, device, reference, pixels)
     assert same(res, reference)
 
 
+def test_render_in_launches_of_several_rounds_is_bit_identical(small, device, reference, monkeypatch):
+    """render() on a device without a launch budget, once it has timed a round of the slots, runs
+    several to a launch (up to MULTI_PASS_SECONDS): the same bits."""
+    from volcl import renderer
+    monkeypatch.setattr(renderer, "MULTI_PASS_SECONDS", 0.0)       # one round per launch
+    single = Renderer(small, device=device, seed=7)
+    one_each = single.render(200)
+    monkeypatch.setattr(renderer, "MULTI_PASS_SECONDS", 1e9)
+    r = Renderer(small, device=device, seed=7)
+    res = r.render(200)
+    if device.kind != "gpu":
+        assert single.launches == 5     # 4 x 42 + 32
+        assert r.launches == 3          # 42 spp (timed), 3 x 42 in one launch, the last 32
+    assert same(res, one_each)
+
+
 @pytest.mark.parametrize("calls", [[100], [7, 93], [42, 58], [90, 10]])
 def test_advance_in_launches_of_several_rounds_is_bit_identical(small, device, reference, calls):
     """advance() (the tiles of volcl.rounds) runs whole rounds of the slots several to a launch on a
@@ -97,15 +113,18 @@ def test_restore_refuses_another_seed_or_size(small, device):
         Renderer(cbox(16, 16), device=device, seed=7).restore(state)
 
 
-def test_time_budget_splits_passes_into_short_launches_without_changing_the_image(device):
+def test_time_budget_splits_passes_into_short_launches_without_changing_the_image(device, monkeypatch):
     """What GPUs get (GPU_LAUNCH_SECONDS), forced here on whatever device runs the tests with a
     budget of half a pass: passes split into several launches, and the image is the same."""
+    from volcl import renderer
+    monkeypatch.setattr(renderer, "MULTI_PASS_SECONDS", 1e9)     # no timing in the launch count
     scene = cbox(128, 128)
     plain = Renderer(scene, device=device, seed=1, launch_seconds=None)
     plain.render(1)                                     # PoCL compiles at the first launch
     plain.reset()
     ref = plain.render(4)
-    assert plain.launches == 5                          # one launch per pass without a budget
+    # without a budget: the first pass alone (its time unknown), then the other 3 in one launch
+    assert plain.launches == 3
     budget = Renderer(scene, device=device, seed=1, launch_seconds=ref.seconds / 4 / 2)
     res = budget.render(4)
     assert budget.launches >= 8

@@ -51,6 +51,11 @@ MIN_SPP_FOR_ERROR = 16
 # per work-group size (PoCL does, and picks a size from the global size when given none) then
 # compile once, however many sizes of tiles and launches a render has.
 GROUP_ITEMS = 64
+# On a device without a launch time budget (CPUs), render() runs several whole rounds of the slots
+# in one launch once it knows how long a round takes, up to this long, so that a time limit, an
+# interrupt or the progress bar waits little for the launch under way. A pass of its own costs a
+# launch and a wait for it (on PoCL's CPU device 5-9% of a 128x128 render at one round per launch).
+MULTI_PASS_SECONDS = 0.25
 # bytes of accumulators per pixel and slot: sums and sums of squares (float4 each), invalid and
 # cut-off counts (uint each)
 ACCUMULATOR_BYTES = 40
@@ -213,16 +218,28 @@ class Renderer:
         target = render_target(self, spp, time_limit, target_error)
         rules = StopRules(time_limit, target_error, min_spp, stop)
         reason = "spp"
+        round_seconds = None       # of one whole round of the slots, as last measured
         while target is None or self.samples_done < target:
             t0 = time.perf_counter()
-            count = self.slots - self.samples_done % self.slots
+            done = self.samples_done
+            count = self.slots - done % self.slots
             if target is not None:
-                count = min(count, target - self.samples_done)
-            count = rules.cap(self.samples_done, count)
-            self._pass(self.samples_done, count)
+                count = min(count, target - done)
+            count = rules.cap(done, count)
+            rounds = 1
+            if count == self.slots and round_seconds is not None:
+                limit = MULTI_PASS_SECONDS if rules.time_limit is None else min(MULTI_PASS_SECONDS, rules.seconds_left())
+                rounds = max(1, int(limit / max(round_seconds, 1e-9)))
+                if target is not None:
+                    rounds = min(rounds, (target - done) // self.slots)
+                rounds = max(1, rules.cap(done, rounds * self.slots) // self.slots)
+            count = self._step(count, rounds)
             self.queue.finish()
             self.samples_done += count
-            self.seconds += time.perf_counter() - t0
+            seconds = time.perf_counter() - t0
+            self.seconds += seconds
+            if count % self.slots == 0:
+                round_seconds = seconds / (count // self.slots)
             if progress is not None:
                 progress(count)
             reason = rules.reason(self) or reason
@@ -281,22 +298,30 @@ class Renderer:
         tiles of a render on several devices advance so, volcl.rounds). On a device without a
         launch time budget (CPUs), whole rounds of the slots go several to a launch, up to
         MAX_ITEMS samples: a small tile's pass is too short to pay a launch of its own (on PoCL's
-        CPU device a launch costs about half a millisecond, a 32x32 tile's pass a few)."""
+        CPU device a launch costs about half a millisecond, a 32x32 tile's pass of fog a few)."""
         end = self.samples_done + spp
         while self.samples_done < end:
             t0 = time.perf_counter()
             done = self.samples_done
-            count = min(self.slots - done % self.slots, end - done)
-            rounds = (end - done) // self.slots
-            if done % self.slots == 0 and rounds > 1 and not self.adaptive and self.launch_pixels >= self.npix:
-                passes = max(1, min(rounds, MAX_ITEMS // (self.slots * self.npix)))
-                self._launch(done, self.slots, (self.sums, self.sums_sq, self.invalid, self.cutoffs), passes)
-                count = passes * self.slots
-            else:
-                self._pass(done, count)
+            count = self._step(min(self.slots - done % self.slots, end - done), (end - done) // self.slots)
             self.queue.finish()
             self.samples_done += count
             self.seconds += time.perf_counter() - t0
+
+    def _step(self, count: int, rounds: int) -> int:
+        """Add samples samples_done .. samples_done + count - 1 (within one round of the slots), or,
+        where count is a whole round, up to `rounds` whole rounds in one launch on a device without
+        a launch time budget whose launches hold the whole tile (each work item then renders its
+        slot's samples of those rounds in turn, adding them in the order separate passes would).
+        Returns the samples per pixel added."""
+        done = self.samples_done
+        if count == self.slots and rounds > 1 and not self.adaptive and self.launch_pixels >= self.npix:
+            passes = min(rounds, MAX_ITEMS // (self.slots * self.npix))
+            if passes > 1:
+                self._launch(done, self.slots, (self.sums, self.sums_sq, self.invalid, self.cutoffs), passes)
+                return passes * self.slots
+        self._pass(done, count)
+        return count
 
     @property
     def device_label(self) -> str:
