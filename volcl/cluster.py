@@ -39,9 +39,11 @@ from .rounds import TileJob, TiledRender, WorkersFailed
 # workers and back), so rounds are longer than on one machine.
 CLUSTER_ROUND_SECONDS = 4.0
 # Tiles per worker thread the default tile size aims at: fewer than on one machine, since every
-# task costs a few milliseconds of scheduling and transfers; more than 2, so that the scheduler
-# holds tasks ready for a worker while a finished tile's next round travels through the client.
-CLUSTER_TILES_PER_WORKER = 4
+# task costs a few milliseconds of scheduling and transfers; 2, so that while a finished tile's next
+# round travels through the client another tile's round is ready for the worker (the streamed
+# rounds let tiles run ahead of each other). Against 4, one third of the tasks and a 5-20% higher
+# rate on 2 one-core workers (benchmarks/cluster_scaling.py, the tile-size table).
+CLUSTER_TILES_PER_WORKER = 2
 # A round is at most this many times longer than the one before: more than on one machine
 # (volcl.rounds.ROUND_GROWTH), since the workers built their kernels before the first round
 # and each task costs milliseconds.

@@ -1,5 +1,6 @@
-"""Rendering on one device: launch one sample pass at a time over a tile (by default the whole
-image), accumulate on the device, and read back the mean image with its per-pixel variance.
+"""Rendering on one device: launch sample passes over a tile (by default the whole image), one or,
+on CPUs where a pass is small, several to a launch, accumulate on the device, and read back the
+mean image with its per-pixel variance.
 
 Accumulation layout. The device keeps `slots` accumulators per pixel (several when the image is
 too small to fill the device with one sample per pixel). Sample index i of a pixel always lands in
