@@ -35,12 +35,27 @@ inline float2 texture_map_uv(__global const Texture *t, float2 uv) {
                     t->to_uv[3] * uv.x + t->to_uv[4] * uv.y + t->to_uv[5]);
 }
 
-/* texel (x, y) after wrapping, as a colour (one channel: grey) */
-inline float3 texel_fetch(const SceneData *sc, __global const Texture *t, int x, int y) {
-    x = texture_wrap(x, t->width, t->wrap);
-    y = texture_wrap(y, t->height, t->wrap);
+/* texel (x, y), already wrapped, as a colour (one channel: grey) */
+inline float3 texel_at(const SceneData *sc, __global const Texture *t, int x, int y) {
     __global const float *p = sc->texels + t->data + (y * t->width + x) * t->channels;
     return t->channels == 1 ? (float3)(p[0]) : (float3)(p[0], p[1], p[2]);
+}
+
+/* texel (x, y) after wrapping */
+inline float3 texel_fetch(const SceneData *sc, __global const Texture *t, int x, int y) {
+    return texel_at(sc, t, texture_wrap(x, t->width, t->wrap), texture_wrap(y, t->height, t->wrap));
+}
+
+/* the texels (x, y), (x + 1, y), (x, y + 1) and (x + 1, y + 1) of a bilinear lookup, the two
+ * columns and rows wrapped once each (a wrap is an integer division), not once per texel */
+inline void texel_square(const SceneData *sc, __global const Texture *t, int x, int y, float3 *c00, float3 *c10,
+                         float3 *c01, float3 *c11) {
+    int x0 = texture_wrap(x, t->width, t->wrap), x1 = texture_wrap(x + 1, t->width, t->wrap);
+    int y0 = texture_wrap(y, t->height, t->wrap), y1 = texture_wrap(y + 1, t->height, t->wrap);
+    *c00 = texel_at(sc, t, x0, y0);
+    *c10 = texel_at(sc, t, x1, y0);
+    *c01 = texel_at(sc, t, x0, y1);
+    *c11 = texel_at(sc, t, x1, y1);
 }
 
 /* continuous texel coordinates, kept in the range where int conversion is defined (float32 has no
@@ -59,8 +74,10 @@ inline float3 bitmap_lookup(const SceneData *sc, __global const Texture *t, floa
     float fx = floor(px), fy = floor(py);
     int x = (int)fx, y = (int)fy;
     float wx = px - fx, wy = py - fy;
-    float3 a = texel_fetch(sc, t, x, y) * (1.0f - wx) + texel_fetch(sc, t, x + 1, y) * wx;
-    float3 b = texel_fetch(sc, t, x, y + 1) * (1.0f - wx) + texel_fetch(sc, t, x + 1, y + 1) * wx;
+    float3 c00, c10, c01, c11;
+    texel_square(sc, t, x, y, &c00, &c10, &c01, &c11);
+    float3 a = c00 * (1.0f - wx) + c10 * wx;
+    float3 b = c01 * (1.0f - wx) + c11 * wx;
     return a * (1.0f - wy) + b * wy;
 }
 
@@ -124,8 +141,8 @@ inline float2 texture_grad1(const SceneData *sc, int index, float2 uv) {
     float fx = floor(px), fy = floor(py);
     int x = (int)fx, y = (int)fy;
     float w1x = px - fx, w1y = py - fy, w0x = 1.0f - w1x, w0y = 1.0f - w1y;
-    float3 c00 = texel_fetch(sc, t, x, y), c10 = texel_fetch(sc, t, x + 1, y);
-    float3 c01 = texel_fetch(sc, t, x, y + 1), c11 = texel_fetch(sc, t, x + 1, y + 1);
+    float3 c00, c10, c01, c11;
+    texel_square(sc, t, x, y, &c00, &c10, &c01, &c11);
     float f00 = t->channels == 1 ? c00.x : luminance(c00), f10 = t->channels == 1 ? c10.x : luminance(c10);
     float f01 = t->channels == 1 ? c01.x : luminance(c01), f11 = t->channels == 1 ? c11.x : luminance(c11);
     float dx = w0y * (f10 - f00) + w1y * (f11 - f01);
