@@ -185,12 +185,14 @@ class Renderer:
         items_next = 1 << int(np.floor(np.log2(want)))
         self.launch_pixels = int(np.clip(items_next // self.slots, 1, min(2 * self.launch_pixels, self.npix)))
 
-    def _pass(self, done: int, count: int):
-        """Add samples done .. done + count - 1 (all in one round of the slots) to every pixel."""
+    def _pass(self, done: int, count: int, passes: int = 1):
+        """Add samples done .. done + count - 1 (all in one round of the slots) to every pixel; with
+        passes > 1 (count then a whole round, from its start), that many rounds in each launch."""
         first_slot = done % self.slots
         assert first_slot + count <= self.slots
+        assert passes == 1 or (first_slot == 0 and count == self.slots)
         if first_slot == 0:
-            self._launch(done, count, (self.sums, self.sums_sq, self.invalid, self.cutoffs))
+            self._launch(done, count, (self.sums, self.sums_sq, self.invalid, self.cutoffs), passes)
             return
         # Slots first_slot.. of the accumulators: the kernel writes slots from 0, so those rows go
         # through scratch buffers and back; the kernel does the same float operations on the same
@@ -315,14 +317,11 @@ class Renderer:
         a launch time budget whose launches hold the whole tile (each work item then renders its
         slot's samples of those rounds in turn, adding them in the order separate passes would).
         Returns the samples per pixel added."""
-        done = self.samples_done
-        if count == self.slots and rounds > 1 and not self.adaptive and self.launch_pixels >= self.npix:
-            passes = min(rounds, MAX_ITEMS // (self.slots * self.npix))
-            if passes > 1:
-                self._launch(done, self.slots, (self.sums, self.sums_sq, self.invalid, self.cutoffs), passes)
-                return passes * self.slots
-        self._pass(done, count)
-        return count
+        passes = 1
+        if count == self.slots and not self.adaptive and self.launch_pixels >= self.npix:
+            passes = max(1, min(rounds, MAX_ITEMS // (self.slots * self.npix)))
+        self._pass(self.samples_done, count, passes)
+        return passes * count
 
     @property
     def device_label(self) -> str:
