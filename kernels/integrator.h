@@ -261,16 +261,21 @@ typedef struct {
 /* Density of the distance medium_sample_distance (media.h) draws for throughput beta, at t inside
  * the segment; it mirrors that sampler's channel choice. Absolute (not relative to the smallest
  * extinction): MIS compares it with p_e, and where it underflows p_e rightly takes all the weight. */
-inline float medium_distance_pdf(__global const Medium *m, float3 beta, float t) {
+inline float medium_distance_pdf_tr(__global const Medium *m, float3 beta, float3 tr) {
     float3 sigma_t = vload_f3(m->sigma_t);
 #if VOLCL_HAS_CHROMATIC_MEDIA
     float3 p = fmax(beta, 0.0f);
     float total = p.x + p.y + p.z;
     p = total > 0.0f ? p / total : (float3)(1.0f / 3.0f);
-    return dot(p, sigma_t * transmittance_exp(sigma_t, t));
+    return dot(p, sigma_t * tr);
 #else
-    return sigma_t.x * exp(-sigma_t.x * t);
+    return sigma_t.x * tr.x;
 #endif
+}
+
+/* The same from t; medium_distance_pdf_tr takes the transmittance to t where the caller has it. */
+inline float medium_distance_pdf(__global const Medium *m, float3 beta, float t) {
+    return medium_distance_pdf_tr(m, beta, transmittance_exp(vload_f3(m->sigma_t), t));
 }
 
 inline float equiangular_weight(int tech, int mis, float pdf_e, float pdf_d) {
@@ -338,15 +343,15 @@ inline float3 equiangular_direct(const SceneData *sc, Rng *rng, EquiangularSegme
     if (!(d2 > 0.0f)) return (float3)(0.0f);
     float dist = sqrt(d2);
     float3 wi = v / dist;
-    float w = equiangular_weight(es->tech, sc->params->mis, pdf_e, medium_distance_pdf(m, es->beta, t));
+    float3 sigma_t = vload_f3(m->sigma_t);
+    float3 tr = transmittance_exp(sigma_t, t);
+    float w = equiangular_weight(es->tech, sc->params->mis, pdf_e, medium_distance_pdf_tr(m, es->beta, tr));
     if (!(w > 0.0f)) return (float3)(0.0f);
     float3 tr_shadow = shadow_transmittance(sc, x, wi, dist * 0.9999f, medium, rng, cutoffs);
     if (max_component(tr_shadow) <= 0.0f) return (float3)(0.0f);
-    float3 sigma_t = vload_f3(m->sigma_t);
     float3 sigma_s = sigma_t * vload_f3(m->albedo);
     float ph = phase_eval(sc, m, es->d, wi);
-    return transmittance_exp(sigma_t, t) * sigma_s * tr_shadow * light_point_emission(sc, l, -wi)
-           * (ph * w * (float)count / (pdf_e * d2));
+    return tr * sigma_s * tr_shadow * light_point_emission(sc, l, -wi) * (ph * w * (float)count / (pdf_e * d2));
 }
 #endif
 

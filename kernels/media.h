@@ -48,8 +48,8 @@ inline MediumSample medium_sample_distance(__global const Medium *m, float t_max
     if (p.x > 0.0f) sigma_ref = sigma_t.x;
     if (p.y > 0.0f) sigma_ref = fmin(sigma_ref, sigma_t.y);
     if (p.z > 0.0f) sigma_ref = fmin(sigma_ref, sigma_t.z);
-    /* u_dist < 1, so log1p(-u) is finite; sigma = 0 means the segment is never cut */
-    float t = sigma_c > 0.0f ? -log1p(-u_dist) / sigma_c : INFINITY;
+    /* u_dist < 1, so the log is finite (see medium_sample_tau); sigma = 0: the segment is never cut */
+    float t = sigma_c > 0.0f ? -log(1.0f - u_dist) / sigma_c : INFINITY;
     ms.scattered = t < t_max;
     ms.t = ms.scattered ? t : t_max;
     float3 rel = transmittance_exp(sigma_t - sigma_ref, ms.t);
@@ -65,7 +65,7 @@ inline MediumSample medium_sample_distance(__global const Medium *m, float t_max
 #else
     /* grey extinction: the exponentials cancel exactly against the pdf */
     float sigma = sigma_t.x;
-    float t = sigma > 0.0f ? -log1p(-u_dist) / sigma : INFINITY;
+    float t = sigma > 0.0f ? -log(1.0f - u_dist) / sigma : INFINITY;
     ms.scattered = t < t_max;
     ms.t = ms.scattered ? t : t_max;
     ms.weight = ms.scattered ? albedo : (float3)(1.0f);
@@ -156,8 +156,10 @@ inline bool medium_emits(__global const Medium *m) {
 }
 #endif
 
-/* Exponential optical depth to the next tentative collision (u < 1, so always finite). */
-inline float medium_sample_tau(Rng *rng) { return -log1p(-rng_next_float(rng)); }
+/* Exponential optical depth to the next tentative collision (u < 1, so always finite). The
+ * variates are multiples of 2^-24 (rng.h), so 1 - u is exact and log(1 - u) is log1p(-u) up to
+ * the log's own rounding, at a lower cost than log1p. */
+inline float medium_sample_tau(Rng *rng) { return -log(1.0f - rng_next_float(rng)); }
 
 /* The majorant walk both trackers share: tentative collisions along a segment through an extinction
  * grid, drawn from the piecewise-constant majorant of the cells the ray crosses (grid.h). The

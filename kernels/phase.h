@@ -46,7 +46,7 @@ inline float phase_hg_sample_w(float ag, float u) {
 inline float3 phase_direction_at(float3 peak, float w, float u) {
     float sn = sqrt(fmax(0.0f, w * (2.0f - w)));
     /* native trig: only the azimuth, any angle error is a rotation about the peak */
-    float cp = native_cos(2.0f * VOLCL_PI * u), sp = native_sin(2.0f * VOLCL_PI * u);
+    float cp, sp = sincos_turn(u, &cp);
     float3 s, t;
     make_frame(peak, &s, &t);
     return normalize(frame_to_world((float3)(sn * cp, sn * sp, 1.0f - w), s, t, peak));

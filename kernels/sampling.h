@@ -3,20 +3,20 @@
 #ifndef VOLCL_SAMPLING_H
 #define VOLCL_SAMPLING_H
 
+#include "trig.h"
+
 /* Concentric map (Shirley and Chiu): keeps strata compact, unlike the polar map. */
 inline float2 sample_concentric_disk(float2 u) {
     float2 o = 2.0f * u - 1.0f;
     if (o.x == 0.0f && o.y == 0.0f) return (float2)(0.0f, 0.0f);
-    float r, theta;
+    /* the angle is a in [-pi/4, pi/4] in the first case and pi/2 - a in the second, whose cosine and
+     * sine are a's sine and cosine */
     if (fabs(o.x) > fabs(o.y)) {
-        r = o.x;
-        theta = (VOLCL_PI / 4.0f) * (o.y / o.x);
-    } else {
-        r = o.y;
-        theta = (VOLCL_PI / 2.0f) - (VOLCL_PI / 4.0f) * (o.x / o.y);
+        float a = (VOLCL_PI / 4.0f) * (o.y / o.x);
+        return o.x * (float2)(cos_small(a), sin_small(a));
     }
-    float c = native_cos(theta), sn = native_sin(theta);
-    return r * (float2)(c, sn);
+    float a = (VOLCL_PI / 4.0f) * (o.x / o.y);
+    return o.y * (float2)(sin_small(a), cos_small(a));
 }
 
 inline float3 sample_cosine_hemisphere(float2 u) {
@@ -30,7 +30,7 @@ inline float sample_cosine_hemisphere_pdf(float3 v) { return v.z > 0.0f ? v.z * 
 inline float3 sample_uniform_sphere(float2 u) {
     float z = 1.0f - 2.0f * u.x;
     float r = sqrt(fmax(0.0f, 1.0f - z * z));
-    float c = native_cos(2.0f * VOLCL_PI * u.y), s = native_sin(2.0f * VOLCL_PI * u.y);
+    float c, s = sincos_turn(u.y, &c);
     return (float3)(r * c, r * s, z);
 }
 
@@ -46,7 +46,7 @@ inline float2 sample_uniform_triangle(float2 u) {
 inline float3 sample_uniform_cone(float2 u, float cos_max) {
     float cos_t = 1.0f - u.x * (1.0f - cos_max);
     float sin_t = sqrt(fmax(0.0f, 1.0f - cos_t * cos_t));
-    float c = native_cos(2.0f * VOLCL_PI * u.y), s = native_sin(2.0f * VOLCL_PI * u.y);
+    float c, s = sincos_turn(u.y, &c);
     return (float3)(sin_t * c, sin_t * s, cos_t);
 }
 

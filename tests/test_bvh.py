@@ -150,6 +150,46 @@ def test_two_primitives(max_leaf):
     assert depth.max() == (1 if max_leaf == 1 else 0)
 
 
+def room_walls():
+    """The six faces of a 2 x 1.6 x 4 room, two triangles each, as (12, 3, 3) vertices (face f
+    holds triangles 2f and 2f + 1)."""
+    corners = np.array([[x, y, z] for x in (-1.0, 1.0) for y in (0.0, 1.6) for z in (-1.0, 3.0)])
+    faces = [(0, 1, 3, 2), (4, 5, 7, 6), (0, 1, 5, 4), (2, 3, 7, 6), (0, 2, 6, 4), (1, 3, 7, 5)]
+    return np.array([corners[[a, b, c]] for a, b, c, d in faces for (a, b, c) in ((a, b, c), (a, c, d))])
+
+
+def leaf_groups(nodes, order):
+    """The primitives of each leaf, as sets."""
+    leaves = np.flatnonzero(nodes["count"] > 0)
+    return [set(order[nodes["index"][i]:nodes["index"][i] + nodes["count"][i]].tolist()) for i in leaves]
+
+
+def test_walls_of_a_room_get_a_leaf_each():
+    # Any two walls fit one leaf of four, but their box spans the room: a ray inside it tests both
+    # walls' packet where it would have entered only one wall's box (_small_splits).
+    tris = room_walls()
+    lo, hi = tri_boxes(tris)
+    nodes, order = build_bvh(lo, hi)
+    check_tree(nodes, order, lo, hi)
+    groups = leaf_groups(nodes, order)
+    assert sorted(map(sorted, groups)) == [[2 * f, 2 * f + 1] for f in range(6)]
+
+
+def test_neighbouring_triangles_of_a_mesh_share_leaves():
+    # A gently curved grid of 32 x 32 quads: leaves of four neighbouring triangles, whose halves'
+    # boxes add up to about as much area as theirs, stay whole.
+    n = 32
+    x, z = np.meshgrid(np.linspace(0.0, 1.0, n + 1), np.linspace(0.0, 1.0, n + 1), indexing="ij")
+    v = np.stack([x, 0.1 * np.sin(3.0 * x + 2.0 * z), z], -1)
+    a, b, c, d = v[:-1, :-1], v[1:, :-1], v[1:, 1:], v[:-1, 1:]
+    tris = np.concatenate([np.stack([a, b, c], -2), np.stack([a, c, d], -2)]).reshape(-1, 3, 3)
+    lo, hi = tri_boxes(tris)
+    nodes, order = build_bvh(lo, hi)
+    check_tree(nodes, order, lo, hi)
+    counts = nodes["count"][nodes["count"] > 0]
+    assert counts.mean() > 3.0, np.bincount(counts)
+
+
 @pytest.mark.parametrize("max_leaf", [1, 4])
 def test_identical_boxes_split_by_index_median(max_leaf):
     lo = np.tile([[1.0, 1.0, 1.0]], (1000, 1))

@@ -22,6 +22,12 @@ from volcl.layout import BVH_NODE
 # Splits are constrained so that no leaf lies deeper than this (root depth 0), with headroom.
 MAX_DEPTH = 48
 
+# A binary node's box test relative to a leaf packet's test, for the splits of small nodes
+# (_small_splits): collapsed into an 8-wide node it is one lane of the parent's box test and one
+# stack entry. Measured on textured_cbox.xml: 0.15 takes 18% off its render time, 0.2 and 0.3 only
+# 12% (they keep its ceiling and side wall, areas 0.82 of their box, in one leaf).
+SMALL_SPLIT_NODE_COST = 0.15
+
 
 def build_bvh(lo, hi, max_leaf=4, bins=16):
     """Build a binned-SAH BVH over axis-aligned boxes.
@@ -179,21 +185,42 @@ def _build_levels(data, max_leaf, bins):
 def _split_level(act, order, depth, max_leaf, bins):
     """Bound every active node of one level, finish the small ones as leaves, split the rest.
 
+    A node of at most max_leaf primitives becomes a leaf unless splitting it pays (_small_splits);
+    a root that small always does, since the kernel tests a tree of one leaf without any box test.
     Returns a record (bmin, bmax, start, count, is_leaf, child) where child is the level-local
     index of the left child in the next level (right child = child + 1), and the next level.
     """
     bmin = np.minimum.reduceat(act.data[0:3], act.off, axis=1).T
     bmax = np.maximum.reduceat(act.data[3:6], act.off, axis=1).T
-    leaf = act.count <= max_leaf
-    _emit_leaves(act, leaf, order)
-    inner = ~leaf
+    cand = act.count > 1
+    sub = act.subset(cand)
+    goes_left, value, median, child_area = _choose_splits(sub, depth, max_leaf, bins)
+    split = sub.count > max_leaf
+    if depth > 0:
+        split |= _small_splits(sub.count, median, child_area, _half_area(bmin[cand].T, bmax[cand].T),
+                               max_leaf)
+    inner = np.zeros(len(act.count), bool)
+    inner[cand] = split
+    _emit_leaves(act, ~inner, order)
     child = np.full(len(act.count), -1, np.int64)
     child[inner] = 2 * np.arange(np.count_nonzero(inner))
-    record = (bmin, bmax, act.start, act.count, leaf, child)
+    record = (bmin, bmax, act.start, act.count, ~inner, child)
 
-    act = act.subset(inner)
-    goes_left, value, median = _choose_splits(act, depth, max_leaf, bins)
-    return record, _partition(act, goes_left, value, median)
+    keep = split[sub.seg]
+    return record, _partition(sub.subset(split), goes_left[keep], value[keep], median[split])
+
+
+def _small_splits(count, median, child_area, area, max_leaf):
+    """Which nodes of at most max_leaf primitives split further, by the SAH with the costs of
+    leaf packets: a leaf of up to max_leaf primitives is one packet test whatever its count, so
+    a split replaces one test by the node's box test and a test of each child, each paid by the
+    rays that enter its box. It pays when the children's areas add up to less than the node's by
+    more than the box test's cost (SMALL_SPLIT_NODE_COST packet tests). Large primitives that
+    share a leaf only because there are few of them, such as the walls of a room, whose boxes
+    together span the room, split; a leaf of neighbouring triangles of a mesh mostly does not (8% of
+    them split on a 200k-triangle sphere, whose small nodes' ratio of areas has median 1.19)."""
+    small = (count <= max_leaf) & ~median
+    return small & (child_area < (1.0 - SMALL_SPLIT_NODE_COST) * area)
 
 
 def _emit_leaves(act, leaf, order):
@@ -211,10 +238,10 @@ def _choose_splits(act, depth, max_leaf, bins):
     m = len(act.count)
     key, value, flat = _bin_keys(act, act.data[6:9], bins)
     counts, bin_lo, bin_hi = _bin_stats(key, act.data[0:3], act.data[3:6], m, bins)
-    split_bin, n_left = _sah_sweep(counts, bin_lo, bin_hi)
+    split_bin, n_left, child_area = _sah_sweep(counts, bin_lo, bin_hi, act.count <= max_leaf)
     median = _needs_median(act.count, n_left, flat, depth, max_leaf)
     goes_left = key // m <= split_bin[act.seg]
-    return goes_left, value, median
+    return goes_left, value, median, child_area
 
 
 def _bin_keys(act, cen, bins):
@@ -276,12 +303,13 @@ def _scan(ufunc, x):
     return out
 
 
-def _sah_sweep(counts, bin_lo, bin_hi):
+def _sah_sweep(counts, bin_lo, bin_hi, packet):
     """Best split plane per node from prefix (left) and suffix (right) scans over the bins.
 
     counts (bins, m), bin_lo / bin_hi (bins, 3, m). Returns the split bin s (bins <= s go left)
-    minimizing A_left * N_left + A_right * N_right, and its left count (0 or the node's count when
-    no plane separates the primitives).
+    minimizing A_left * N_left + A_right * N_right, or A_left + A_right for the nodes where
+    `packet` is set (whose children are one leaf packet each, whatever their counts), its left
+    count (0 or the node's count when no plane separates the primitives), and A_left + A_right.
     """
     n_left = np.cumsum(counts, axis=0)[:-1]
     n_right = n_left[-1] + counts[-1] - n_left
@@ -289,10 +317,11 @@ def _sah_sweep(counts, bin_lo, bin_hi):
                         _scan(np.maximum, bin_hi)[:-1].transpose(1, 0, 2))
     a_right = _half_area(_scan(np.minimum, bin_lo[::-1])[-2::-1].transpose(1, 0, 2),
                          _scan(np.maximum, bin_hi[::-1])[-2::-1].transpose(1, 0, 2))
-    cost = a_left * n_left + a_right * n_right
+    cost = np.where(packet, a_left + a_right, a_left * n_left + a_right * n_right)
     cost[(n_left == 0) | (n_right == 0)] = np.inf
     split_bin = np.argmin(cost, axis=0)
-    return split_bin, n_left[split_bin, np.arange(len(split_bin))]
+    nodes = np.arange(len(split_bin))
+    return split_bin, n_left[split_bin, nodes], a_left[split_bin, nodes] + a_right[split_bin, nodes]
 
 
 def _needs_median(count, n_left, flat, depth, max_leaf):

@@ -1,0 +1,11 @@
+/* Test-only kernel for kernels/trig.h: sin and cos of whole turns, as the samplers use them. */
+#include "types.h"
+#include "common.h"
+#include "trig.h"
+
+VOLCL_KERNEL void trig_turn(__global const float *u, __global float *sin_out, __global float *cos_out) {
+    int i = get_global_id(0);
+    float c;
+    sin_out[i] = sincos_turn(u[i], &c);
+    cos_out[i] = c;
+}
