@@ -192,22 +192,18 @@ def _split_level(act, order, depth, max_leaf, bins):
     """
     bmin = np.minimum.reduceat(act.data[0:3], act.off, axis=1).T
     bmax = np.maximum.reduceat(act.data[3:6], act.off, axis=1).T
-    cand = act.count > 1
-    sub = act.subset(cand)
-    goes_left, value, median, child_area = _choose_splits(sub, depth, max_leaf, bins)
-    split = sub.count > max_leaf
+    # every node's split, the small ones' too (a node of one primitive gets a median flag)
+    goes_left, value, median, child_area = _choose_splits(act, depth, max_leaf, bins)
+    inner = act.count > max_leaf
     if depth > 0:
-        split |= _small_splits(sub.count, median, child_area, _half_area(bmin[cand].T, bmax[cand].T),
-                               max_leaf)
-    inner = np.zeros(len(act.count), bool)
-    inner[cand] = split
+        inner |= _small_splits(act.count, median, child_area, _half_area(bmin.T, bmax.T), max_leaf)
     _emit_leaves(act, ~inner, order)
     child = np.full(len(act.count), -1, np.int64)
     child[inner] = 2 * np.arange(np.count_nonzero(inner))
     record = (bmin, bmax, act.start, act.count, ~inner, child)
 
-    keep = split[sub.seg]
-    return record, _partition(sub.subset(split), goes_left[keep], value[keep], median[split])
+    keep = inner[act.seg]
+    return record, _partition(act.subset(inner), goes_left[keep], value[keep], median[inner])
 
 
 def _small_splits(count, median, child_area, area, max_leaf):
@@ -230,10 +226,11 @@ def _emit_leaves(act, leaf, order):
 
 
 def _choose_splits(act, depth, max_leaf, bins):
-    """Binned SAH over every node of `act` (all of which must split).
+    """Binned SAH over every node of `act` (a node of one primitive gets a median flag).
 
     Returns the per-primitive side (True = left) of the SAH plane, the centroid coordinate on the
-    split axis per primitive, and which nodes use a median split instead (see _needs_median).
+    split axis per primitive, which nodes would use a median split instead (see _needs_median), and
+    the children's summed half areas at the plane.
     """
     m = len(act.count)
     key, value, flat = _bin_keys(act, act.data[6:9], bins)
