@@ -27,6 +27,7 @@ MAX_DEPTH = 48
 # stack entry. Measured on textured_cbox.xml: 0.15 takes 18% off its render time, 0.2 and 0.3 only
 # 12% (they keep its ceiling and side wall, areas 0.82 of their box, in one leaf).
 SMALL_SPLIT_NODE_COST = 0.15
+SMALL_SPLIT_MIN_AREA = 1e-4
 
 
 def build_bvh(lo, hi, max_leaf=4, bins=16):
@@ -175,14 +176,15 @@ def _build_levels(data, max_leaf, bins):
                   np.array([n], np.int64))
     levels = []
     depth = 0
+    root_area = float(_half_area(data[0:3].min(axis=1), data[3:6].max(axis=1))) if n else 0.0
     while len(act.count):
-        record, act = _split_level(act, order, depth, max_leaf, bins)
+        record, act = _split_level(act, order, depth, max_leaf, bins, root_area)
         levels.append(record)
         depth += 1
     return levels, order
 
 
-def _split_level(act, order, depth, max_leaf, bins):
+def _split_level(act, order, depth, max_leaf, bins, root_area):
     """Bound every active node of one level, finish the small ones as leaves, split the rest.
 
     A node of at most max_leaf primitives becomes a leaf unless splitting it pays (_small_splits);
@@ -192,31 +194,79 @@ def _split_level(act, order, depth, max_leaf, bins):
     """
     bmin = np.minimum.reduceat(act.data[0:3], act.off, axis=1).T
     bmax = np.maximum.reduceat(act.data[3:6], act.off, axis=1).T
-    # every node's split, the small ones' too (a node of one primitive gets a median flag)
-    goes_left, value, median, child_area = _choose_splits(act, depth, max_leaf, bins)
     inner = act.count > max_leaf
-    if depth > 0:
-        inner |= _small_splits(act.count, median, child_area, _half_area(bmin.T, bmax.T), max_leaf)
+    small_left = None
+    if 0 < depth < MAX_DEPTH:
+        small, small_left = _small_splits(act, _half_area(bmin.T, bmax.T), root_area, max_leaf)
+        inner |= small
     _emit_leaves(act, ~inner, order)
     child = np.full(len(act.count), -1, np.int64)
     child[inner] = 2 * np.arange(np.count_nonzero(inner))
     record = (bmin, bmax, act.start, act.count, ~inner, child)
 
     keep = inner[act.seg]
-    return record, _partition(act.subset(inner), goes_left[keep], value[keep], median[inner])
+    act = act.subset(inner)
+    goes_left, value, median = _choose_splits(act, depth, max_leaf, bins)
+    if small_left is not None:
+        # the small nodes' own splits (their binned SAH planes are not used)
+        small_node = act.count <= max_leaf
+        goes_left = np.where(small_node[act.seg], small_left[keep], goes_left)
+        median &= ~small_node
+    return record, _partition(act, goes_left, value, median)
 
 
-def _small_splits(count, median, child_area, area, max_leaf):
-    """Which nodes of at most max_leaf primitives split further, by the SAH with the costs of
-    leaf packets: a leaf of up to max_leaf primitives is one packet test whatever its count, so
-    a split replaces one test by the node's box test and a test of each child, each paid by the
-    rays that enter its box. It pays when the children's areas add up to less than the node's by
-    more than the box test's cost (SMALL_SPLIT_NODE_COST packet tests). Large primitives that
-    share a leaf only because there are few of them, such as the walls of a room, whose boxes
-    together span the room, split; a leaf of neighbouring triangles of a mesh mostly does not (8% of
-    them split on a 200k-triangle sphere, whose small nodes' ratio of areas has median 1.19)."""
-    small = (count <= max_leaf) & ~median
-    return small & (child_area < (1.0 - SMALL_SPLIT_NODE_COST) * area)
+def _small_splits(act, area, root_area, max_leaf):
+    """Which nodes of 2 to max_leaf primitives split further, by the SAH with the costs of leaf
+    packets, and for them each primitive's side (True = left; a per-primitive array over act).
+
+    A leaf of up to max_leaf primitives is one packet test whatever its count, so a split replaces
+    one test by the node's box test and a test of each child, each paid by the rays that enter its
+    box. It pays when the children's areas add up to less than the node's by more than the box
+    test's cost (SMALL_SPLIT_NODE_COST packet tests). Large primitives that share a leaf only
+    because there are few of them, such as the walls of a room, whose boxes together span the room,
+    split; a leaf of neighbouring triangles of a mesh mostly does not (8% of them split on a
+    200k-triangle sphere, whose small nodes' ratio of areas has median 1.19).
+
+    Every split between consecutive primitives in centroid order along the axis of largest
+    centroid extent is tried (at most max_leaf - 1 per node, on arrays padded to max_leaf slots):
+    exact, and cheaper than binning the many small nodes of a large mesh's last levels. A node
+    whose area is below SMALL_SPLIT_MIN_AREA of the root's stays a leaf untried: the SAH saving
+    of a split is at most that share of a ray's cost, and the last levels of a large mesh hold
+    hundreds of thousands of such nodes, whose trial would add a quarter to the build time.
+    """
+    nodes = np.flatnonzero((act.count >= 2) & (act.count <= max_leaf) & (area >= SMALL_SPLIT_MIN_AREA * root_area))
+    split = np.zeros(len(act.count), bool)
+    goes_left = np.zeros(len(act.prim), bool)
+    if len(nodes) == 0:
+        return split, goes_left
+    k, lanes = len(nodes), np.arange(max_leaf)
+    valid = lanes < act.count[nodes][:, None]
+    slot = act.off[nodes][:, None] + np.where(valid, lanes, 0)           # padding repeats slot 0
+    cen = act.data[6:9][:, slot].astype(np.float64)                       # (3, k, max_leaf)
+    axis = np.argmax(cen.max(axis=2) - cen.min(axis=2), axis=0)
+    value = np.where(valid, cen[axis, np.arange(k)], np.inf)
+    by_value = np.argsort(value, axis=1, kind="stable")
+    value = np.take_along_axis(value, by_value, 1)
+    slot = np.take_along_axis(slot, by_value, 1)
+    valid = np.take_along_axis(valid, by_value, 1)
+    lo = np.where(valid, act.data[0:3][:, slot], np.inf)
+    hi = np.where(valid, act.data[3:6][:, slot], -np.inf)
+    a_left = _half_area(np.minimum.accumulate(lo, axis=2), np.maximum.accumulate(hi, axis=2))[:, :-1]
+    a_right = _half_area(np.minimum.accumulate(lo[:, :, ::-1], axis=2)[:, :, ::-1],
+                         np.maximum.accumulate(hi[:, :, ::-1], axis=2)[:, :, ::-1])[:, 1:]
+    # a plane lies between two different centroids, with a primitive on each side
+    cost = np.where(valid[:, 1:] & (value[:, :-1] < value[:, 1:]), a_left + a_right, np.inf)
+    best = np.argmin(cost, axis=1)
+    ok = cost[np.arange(k), best] < (1.0 - SMALL_SPLIT_NODE_COST) * area[nodes]
+    split[nodes[ok]] = True
+    # left: the primitives whose centroid lies below the first one right of the plane
+    threshold = np.full(len(act.count), -np.inf)
+    threshold[nodes[ok]] = value[ok, best[ok] + 1]
+    node_axis = np.zeros(len(act.count), np.int64)
+    node_axis[nodes] = axis
+    mine = act.data[6:9][node_axis[act.seg], np.arange(len(act.prim))].astype(np.float64)
+    goes_left = mine < threshold[act.seg]
+    return split, goes_left
 
 
 def _emit_leaves(act, leaf, order):
@@ -226,19 +276,18 @@ def _emit_leaves(act, leaf, order):
 
 
 def _choose_splits(act, depth, max_leaf, bins):
-    """Binned SAH over every node of `act` (a node of one primitive gets a median flag).
+    """Binned SAH over every node of `act` (all of which must split).
 
     Returns the per-primitive side (True = left) of the SAH plane, the centroid coordinate on the
-    split axis per primitive, which nodes would use a median split instead (see _needs_median), and
-    the children's summed half areas at the plane.
+    split axis per primitive, and which nodes use a median split instead (see _needs_median).
     """
     m = len(act.count)
     key, value, flat = _bin_keys(act, act.data[6:9], bins)
     counts, bin_lo, bin_hi = _bin_stats(key, act.data[0:3], act.data[3:6], m, bins)
-    split_bin, n_left, child_area = _sah_sweep(counts, bin_lo, bin_hi, act.count <= max_leaf)
+    split_bin, n_left = _sah_sweep(counts, bin_lo, bin_hi)
     median = _needs_median(act.count, n_left, flat, depth, max_leaf)
     goes_left = key // m <= split_bin[act.seg]
-    return goes_left, value, median, child_area
+    return goes_left, value, median
 
 
 def _bin_keys(act, cen, bins):
@@ -300,13 +349,12 @@ def _scan(ufunc, x):
     return out
 
 
-def _sah_sweep(counts, bin_lo, bin_hi, packet):
+def _sah_sweep(counts, bin_lo, bin_hi):
     """Best split plane per node from prefix (left) and suffix (right) scans over the bins.
 
     counts (bins, m), bin_lo / bin_hi (bins, 3, m). Returns the split bin s (bins <= s go left)
-    minimizing A_left * N_left + A_right * N_right, or A_left + A_right for the nodes where
-    `packet` is set (whose children are one leaf packet each, whatever their counts), its left
-    count (0 or the node's count when no plane separates the primitives), and A_left + A_right.
+    minimizing A_left * N_left + A_right * N_right, and its left count (0 or the node's count when
+    no plane separates the primitives).
     """
     n_left = np.cumsum(counts, axis=0)[:-1]
     n_right = n_left[-1] + counts[-1] - n_left
@@ -314,11 +362,10 @@ def _sah_sweep(counts, bin_lo, bin_hi, packet):
                         _scan(np.maximum, bin_hi)[:-1].transpose(1, 0, 2))
     a_right = _half_area(_scan(np.minimum, bin_lo[::-1])[-2::-1].transpose(1, 0, 2),
                          _scan(np.maximum, bin_hi[::-1])[-2::-1].transpose(1, 0, 2))
-    cost = np.where(packet, a_left + a_right, a_left * n_left + a_right * n_right)
+    cost = a_left * n_left + a_right * n_right
     cost[(n_left == 0) | (n_right == 0)] = np.inf
     split_bin = np.argmin(cost, axis=0)
-    nodes = np.arange(len(split_bin))
-    return split_bin, n_left[split_bin, nodes], a_left[split_bin, nodes] + a_right[split_bin, nodes]
+    return split_bin, n_left[split_bin, np.arange(len(split_bin))]
 
 
 def _needs_median(count, n_left, flat, depth, max_leaf):
