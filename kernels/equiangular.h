@@ -46,7 +46,7 @@ inline bool equiangular_segment(float3 o, float3 d, float t_max, float3 light, E
     float u1 = s->t1 - s->delta;
     /* theta1 - theta0 as one atan2 (tan of a difference): exact even when both angles are close to
      * each other near +-pi/2, where subtracting two atan results would cancel */
-    s->theta = eq_atan2_upper(s->h * (u1 - s->u0), s->h * s->h + s->u0 * u1);
+    s->theta = atan2_upper(s->h * (u1 - s->u0), s->h * s->h + s->u0 * u1);
     return s->theta > 0.0f;
 }
 
@@ -63,7 +63,7 @@ inline float equiangular_segment_pdf(const EquiangularSegment *s, float t) {
  * sqrt(h^2 + u0^2) cos(theta0 + phi) with theta0 + phi < atan(EQUIANGULAR_SPAN) < pi/2). */
 inline bool equiangular_segment_sample(const EquiangularSegment *s, float u, float *t, float *pdf) {
     float phi = u * s->theta;
-    float cp, sp = eq_sincos(phi, &cp);
+    float cp, sp = sincos_upper(phi, &cp);
     float x = s->t0 + sp * (s->h * s->h + s->u0 * s->u0) / (s->h * cp - s->u0 * sp);
     *t = clamp(x, s->t0, s->t1);
     *pdf = equiangular_segment_pdf(s, *t);

@@ -45,7 +45,7 @@ inline float phase_hg_sample_w(float ag, float u) {
 /* The unit direction at distance w = 1 - cos from the unit vector `peak`, at azimuth 2 pi u. */
 inline float3 phase_direction_at(float3 peak, float w, float u) {
     float sn = sqrt(fmax(0.0f, w * (2.0f - w)));
-    /* native trig: only the azimuth, any angle error is a rotation about the peak */
+    /* the azimuth: an error in it is only a rotation about the peak */
     float cp, sp = sincos_turn(u, &cp);
     float3 s, t;
     make_frame(peak, &s, &t);

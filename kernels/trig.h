@@ -9,7 +9,7 @@
 
 /* atan(x) for x >= 0: reduced to |x| <= tan(pi/8) by atan(x) = pi/2 - atan(1/x) and
  * atan(x) = pi/4 + atan((x - 1) / (x + 1)), the constants in two parts (a float and the rest). */
-inline float eq_atan_nonneg(float x) {
+inline float atan_nonneg(float x) {
     float hi = 0.0f, lo = 0.0f;
     if (x > 2.414213562373095f) {
         hi = 1.5707963705062866f;
@@ -26,9 +26,9 @@ inline float eq_atan_nonneg(float x) {
 }
 
 /* atan2(y, x) for y > 0: the angle in (0, pi). */
-inline float eq_atan2_upper(float y, float x) {
-    if (x > 0.0f) return eq_atan_nonneg(y / x);
-    if (x < 0.0f) return (3.1415927410125732f - eq_atan_nonneg(y / -x)) - 8.742278000372485e-8f;
+inline float atan2_upper(float y, float x) {
+    if (x > 0.0f) return atan_nonneg(y / x);
+    if (x < 0.0f) return (3.1415927410125732f - atan_nonneg(y / -x)) - 8.742278000372485e-8f;
     return M_PI_2_F;
 }
 
@@ -46,7 +46,7 @@ inline float cos_small(float a) {
 
 /* sin and cos of phi in [0, pi]: phi - k pi/2 for the nearest k in {0, 1, 2}, with pi/2 in two
  * parts (Cody and Waite) so the reduced angle keeps its low bits. */
-inline float eq_sincos(float phi, float *c) {
+inline float sincos_upper(float phi, float *c) {
     const float half_pi_hi = 1.5707963705062866f, half_pi_lo = -4.371139000186243e-8f;
     int k = (int)(phi * M_2_PI_F + 0.5f);
     float a = (phi - (float)k * half_pi_hi) - (float)k * half_pi_lo;

@@ -35,8 +35,8 @@ VOLCL_KERNEL void equiangular_pdf(__global const float *cfg, __global const floa
 VOLCL_KERNEL void equiangular_math(__global const float *y, __global const float *x, __global const float *phi,
                                    __global float *atan2_out, __global float *sin_out, __global float *cos_out) {
     int i = get_global_id(0);
-    atan2_out[i] = eq_atan2_upper(y[i], x[i]);
+    atan2_out[i] = atan2_upper(y[i], x[i]);
     float c;
-    sin_out[i] = eq_sincos(phi[i], &c);
+    sin_out[i] = sincos_upper(phi[i], &c);
     cos_out[i] = c;
 }
