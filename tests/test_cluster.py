@@ -132,11 +132,13 @@ def test_a_worker_killed_mid_render_loses_nothing(client, device):
     client.wait_for_workers(2, timeout=120)         # the nanny brings the worker back
 
 
-def fail_on_workers(client, tile, from_spp):
+def fail_on_workers(client, tile, from_spp, others_wait=0.0):
     """Make every try of `tile`'s tasks that start at `from_spp` or later raise, in every worker
-    process (their volcl.cluster._tile_renderer replaced); returns a function that counts those
-    tries and undoes it."""
+    process (their volcl.cluster._tile_renderer replaced), and the other tiles' tasks before
+    `from_spp` start `others_wait` seconds late (so that the failure comes while the rounds before
+    it are still rendering); returns a function that counts those tries and undoes it."""
     def install():
+        import time
         from volcl import cluster as c
         original = getattr(c._tile_renderer, "original", c._tile_renderer)
 
@@ -144,6 +146,8 @@ def fail_on_workers(client, tile, from_spp):
             if t == tile and start >= from_spp:
                 failing.tries += 1
                 raise RuntimeError("injected failure")
+            if t != tile and start < from_spp:
+                time.sleep(others_wait)
             return original(scene, spec, t, start)
         failing.original, failing.tries = original, 0
         c._tile_renderer = failing
@@ -159,12 +163,14 @@ def fail_on_workers(client, tile, from_spp):
 
 def test_a_task_failing_on_every_try_stops_the_render_with_its_last_whole_round(client, device, tmp_path):
     """A tile whose task raises on each of its tries (in the worker processes): WorkersFailed, with
-    the image of the last round every tile has, which is a local render's; the batch renderer
-    writes that image and a checkpoint, and --resume continues to the bits of a whole render."""
+    the image of the last round before it, which is a local render's (the other tiles, slowed,
+    are still rendering the rounds before it when it fails: they finish and are merged); the batch
+    renderer writes that image and a checkpoint, and --resume continues to the bits of a whole
+    render."""
     scene = volcl.load_file(SCENES / "fog.xml", **SIZE)
     r = on_cluster(scene, client, seed=7)           # rounds: one pass of the slots, then 1 spp each
     done = r.slots + 2
-    undo = fail_on_workers(client, r.tile_list[-1], done)
+    undo = fail_on_workers(client, r.tile_list[-1], done, others_wait=0.2)
     try:
         with pytest.raises(cluster.WorkersFailed, match="injected failure") as info:
             r.render(done + 10)
@@ -179,7 +185,7 @@ def test_a_task_failing_on_every_try_stops_the_render_with_its_last_whole_round(
     out = tmp_path / "fog.exr"
     options = dict(scene_options=SceneOptions(**SIZE), scheduler=client)
     first = r.slots                                 # the batch's first round: one pass of the slots
-    undo = fail_on_workers(client, r.tile_list[0], first)
+    undo = fail_on_workers(client, r.tile_list[0], first, others_wait=0.5)
     try:
         with pytest.raises(volcl.VolclError, match=f"injected failure.*wrote the image of the {first} spp every "
                                                    f"pixel has to .*continue with --resume"):

@@ -359,6 +359,11 @@ class _Stream:
                                                      raise_errors=False)
         self.jobs: dict = {}            # future -> TileJob in flight
         self.t0 = time.perf_counter()
+        # The first round a task failed in on every try, and that failure: rounds from it on are not
+        # submitted, and the rounds before it finish and are merged before the render stops, so the
+        # image it keeps does not depend on how far the other tiles had got.
+        self.broken: float = float("inf")
+        self.error: WorkersFailed | None = None
 
     def count(self, k: int) -> int | None:
         """Round k's samples per pixel (None: the render ends before round k)."""
@@ -400,6 +405,8 @@ class _Stream:
 
     def submit(self, i: int, k: int):
         """Tile i's round k, from its state at the round's start (the image's, or its round k - 1)."""
+        if k >= self.broken:
+            return
         count = self.count(k)
         if count is None:
             return
@@ -422,19 +429,28 @@ class _Stream:
             job = self.jobs.pop(f)
             if f.status in ("error", "cancelled"):
                 self.failed(f, job, out)
+                if self.merged >= self.broken:
+                    raise self.error
+                continue
             if f.status != "finished":          # its result lost with its worker: Dask computes it again
                 self.jobs[f] = job
                 self.ac.add(f)
+                continue
+            if job.round >= self.broken:        # a round the image will never have
                 continue
             job.out, job.worker, job.seconds = out["state"], out["worker"], out["seconds"]
             self.cost[job.index] = job.seconds / job.count
             self.held[job.round][job.index] = job
             self.render.tile_done(job)
             self.submit(job.index, job.round + 1)
-            while self.merged < len(self.held) and all(self.held[self.merged]):
+            while self.merged < min(len(self.held), self.broken) and all(self.held[self.merged]):
                 reason = self.merge(progress)
                 if reason is not None:
                     return reason
+            if self.merged >= self.broken:
+                raise self.error
+        if self.error is not None:
+            raise self.error
         return "spp"
 
     def merge(self, progress) -> str | None:
@@ -453,13 +469,16 @@ class _Stream:
         return reason
 
     def failed(self, f, job, out):
+        """A task failed on every try: its round and the ones after it are given up."""
         if isinstance(out, BaseException):      # cancelled
             why = f"{type(out).__name__}: {out}"
         else:
             why = f"{out[0].__name__}: {out[1]}"
         self.ex.failures.append((f"task {f.key}", why))
-        raise WorkersFailed(f"tile {job.tile} failed on the cluster on each of its {1 + TASK_RETRIES} tries ({why})",
-                            self.ex.failures)
+        if job.round < self.broken:
+            self.broken = job.round
+            self.error = WorkersFailed(f"tile {job.tile} failed on the cluster on each of its {1 + TASK_RETRIES} "
+                                       f"tries ({why})", self.ex.failures)
 
     def cancel(self):
         """Tasks still in flight (the render has stopped, failed or ended) are not wanted."""
