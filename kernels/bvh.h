@@ -72,14 +72,16 @@ inline Shear shear_make(float3 o, float3 d) {
     s.kz = (a.x > a.y) ? (a.x > a.z ? 0 : 2) : (a.y > a.z ? 1 : 2);
     s.kx = s.kz == 2 ? 0 : s.kz + 1;
     s.ky = s.kx == 2 ? 0 : s.kx + 1;
-    float dz = component(d, s.kz);
-    if (dz < 0.0f) { int tmp = s.kx; s.kx = s.ky; s.ky = tmp; }
-    s.sx = component(d, s.kx) / dz;
-    s.sy = component(d, s.ky) / dz;
-    s.sz = 1.0f / dz;
-    s.ox = component(o, s.kx);
-    s.oy = component(o, s.ky);
-    s.oz = component(o, s.kz);
+    if (component(d, s.kz) < 0.0f) { int tmp = s.kx; s.kx = s.ky; s.ky = tmp; }
+    /* both vectors in the permuted order by one shuffle each, not a select chain per component */
+    uint4 perm = (uint4)((uint)s.kx, (uint)s.ky, (uint)s.kz, 3u);
+    float4 dp = shuffle((float4)(d, 0.0f), perm), op = shuffle((float4)(o, 0.0f), perm);
+    s.sx = dp.x / dp.z;
+    s.sy = dp.y / dp.z;
+    s.sz = 1.0f / dp.z;
+    s.ox = op.x;
+    s.oy = op.y;
+    s.oz = op.z;
     return s;
 }
 

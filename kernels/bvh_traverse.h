@@ -47,7 +47,17 @@ inline int VOLCL_TRAVERSE_NAME(const SceneData *sc, int root, float3 o, float3 d
      * root (0), so child[1] == 0 says this root has one child. The box test culls nothing the
      * primitives' own tests would not, so the hit is the same. */
     __global const BvhWideNode *rn = &sc->nodes[root];
-    if (rn->child[0] < 0 && rn->child[1] == 0) return VOLCL_TRAVERSE_LEAVES(sc, rn->child[0], &sh, o, d, mode, hit);
+    if (rn->child[0] < 0 && rn->child[1] == 0) {
+        int leaf = ~rn->child[0];
+        if ((leaf & 15) == 0) {     /* one packet: its test alone, without the loop's spilled state */
+            __global const LeafPacket *pk = &sc->leaves[leaf >> 4];
+            int h = packet_triangles_intersect(pk, &sh, hit->t, mode, hit);
+            if (h == 2) return 2;
+            int ha = VOLCL_TRAVERSE_LEAF(sc, pk, o, d, mode, hit);
+            return ha == 2 ? 2 : (h | ha) != 0;
+        }
+        return VOLCL_TRAVERSE_LEAVES(sc, rn->child[0], &sh, o, d, mode, hit);
+    }
     int ref = root;         /* the node or leaf visited now: the root first */
     /* a zero direction component becomes a tiny one of the same sign: its slab then spans
      * +-1e30 instead of producing 0 * INF = NaN for an origin on the slab plane */

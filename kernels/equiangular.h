@@ -32,6 +32,7 @@ typedef struct {
 
 /* Set up the interval; false when there is nothing to sample (the light on the ray's line, or the
  * clipped interval empty). Sampler and pdf both start here, so they agree on every rounding. */
+__attribute__((always_inline))
 inline bool equiangular_segment(float3 o, float3 d, float t_max, float3 light, EquiangularSegment *s) {
     float3 v = light - o;
     s->delta = dot(v, d);
@@ -61,6 +62,7 @@ inline float equiangular_segment_pdf(const EquiangularSegment *s, float t) {
  *     t = t0 + sin(phi) (h^2 + u0^2) / (h cos(phi) - u0 sin(phi)),
  * which has no cancellation at t0 and a denominator that stays positive (it is
  * sqrt(h^2 + u0^2) cos(theta0 + phi) with theta0 + phi < atan(EQUIANGULAR_SPAN) < pi/2). */
+__attribute__((always_inline))
 inline bool equiangular_segment_sample(const EquiangularSegment *s, float u, float *t, float *pdf) {
     float phi = u * s->theta;
     float cp, sp = sincos_upper(phi, &cp);

@@ -68,6 +68,7 @@ inline int camera_start_medium(const SceneData *sc, float3 *o, float3 d, float *
  * heterogeneous media an unbiased ratio-tracking estimate, which draws from rng; tracking cut-offs
  * are counted in *cutoffs). *end_medium: the medium at the segment's far end; *last_segment: the
  * length of its last medium segment, from the boundary it entered that medium at (emission NEE). */
+__attribute__((always_inline))
 inline float3 shadow_transmittance_to(const SceneData *sc, float3 o, float3 w, float t_max, int medium, Rng *rng,
                                       uint *cutoffs, int *end_medium, float *last_segment) {
     *end_medium = -2;       /* no medium: the segment was blocked before its end */
@@ -284,8 +285,9 @@ inline float equiangular_weight(int tech, int mis, float pdf_e, float pdf_d) {
 }
 
 /* weight of NEE towards a point light from the distance-sampled vertex at t */
+__attribute__((always_inline))
 inline float equiangular_distance_weight(const SceneData *sc, const EquiangularSegmentState *es,
-                                         __global const Medium *m, const LightSample *ls, float t) {
+                                         __global const Medium *m, const LightSample *ls, float t, float tr) {
     if (es->tech == EQ_NONE || !light_is_point_like(sc->lights[ls->light].type)) return 1.0f;
     if (es->tech == EQ_ONLY_EQUIANGULAR) return 0.0f;
     float pdf_e;
@@ -293,7 +295,7 @@ inline float equiangular_distance_weight(const SceneData *sc, const EquiangularS
         pdf_e = es->seg_ok ? equiangular_segment_pdf(&es->seg, t) : 0.0f;
     else
         pdf_e = sample_equiangular_pdf(es->o, es->d, es->t_seg, vload_f3(sc->lights[ls->light].position), t);
-    float pdf_d = medium_distance_pdf(m, es->beta, t);
+    float pdf_d = tr >= 0.0f ? medium_distance_pdf_tr(m, es->beta, (float3)(tr)) : medium_distance_pdf(m, es->beta, t);
     if (es->tech == EQ_ONLY_DISTANCE) return 2.0f * power_heuristic(pdf_d, pdf_e);
     if (!sc->params->mis) return pdf_e > 0.0f ? 0.0f : 1.0f;
     return power_heuristic(pdf_d, pdf_e);
@@ -322,7 +324,10 @@ inline EquiangularSegmentState equiangular_begin(const SceneData *sc, Rng *rng, 
     return es;
 }
 
-/* The equiangular sample's estimate of D_k for the light it picks, before the factor beta. */
+/* The equiangular sample's estimate of D_k for the light it picks, before the factor beta. This, the
+ * distance sample's weight, the segment set-up and sampler, the shadow query and phase_sample are
+ * always inlined: PoCL left them out of line, passing the segment's state through memory. */
+__attribute__((always_inline))
 inline float3 equiangular_direct(const SceneData *sc, Rng *rng, EquiangularSegmentState *es,
                                  __global const Medium *m, int medium, uint *cutoffs) {
     if (es->tech != EQ_BOTH && es->tech != EQ_ONLY_EQUIANGULAR) return (float3)(0.0f);
@@ -434,7 +439,7 @@ inline int path_medium_event(const SceneData *sc, Rng *rng, PathState *ps, bool 
              * equiangular sample for this segment) the shadow ray would be traced for nothing */
             float w_eq = 1.0f;
 #if VOLCL_HAS_EQUIANGULAR
-            w_eq = equiangular_distance_weight(sc, &es, m, &ls, ms.t);
+            w_eq = equiangular_distance_weight(sc, &es, m, &ls, ms.t, ms.tr);
 #endif
             if (w_eq > 0.0f) {
                 float ph_pdf;

@@ -10,6 +10,7 @@
 #define VOLCL_MEDIA_H
 
 #include "grid.h"   /* heterogeneous media look their grids up through it */
+#include "trig.h"   /* log_pos */
 
 /* exp(-sigma * t) that is 1 for sigma = 0 and 0 for t = INF, never NaN from 0 * INF. */
 inline float3 transmittance_exp(float3 sigma, float t) {
@@ -31,6 +32,8 @@ typedef struct {
     bool scattered;
     float3 weight;      /* factor for the path throughput */
     float3 emission;    /* emitted radiance estimate collected on the segment (emissive media) */
+    float tr;           /* grey homogeneous media, scattered: the transmittance to t, exactly 1 - the
+                         * variate (the distance pdf over sigma_t without an exp); else -1 */
 } MediumSample;
 
 inline MediumSample medium_sample_distance(__global const Medium *m, float t_max, float3 beta,
@@ -38,6 +41,7 @@ inline MediumSample medium_sample_distance(__global const Medium *m, float t_max
     MediumSample ms;
     float3 sigma_t = vload_f3(m->sigma_t), albedo = vload_f3(m->albedo);
     ms.emission = (float3)(0.0f);
+    ms.tr = -1.0f;
 #if VOLCL_HAS_CHROMATIC_MEDIA
     float3 p = fmax(beta, 0.0f);
     float total = p.x + p.y + p.z;
@@ -49,7 +53,7 @@ inline MediumSample medium_sample_distance(__global const Medium *m, float t_max
     if (p.y > 0.0f) sigma_ref = fmin(sigma_ref, sigma_t.y);
     if (p.z > 0.0f) sigma_ref = fmin(sigma_ref, sigma_t.z);
     /* u_dist < 1, so the log is finite (see medium_sample_tau); sigma = 0: the segment is never cut */
-    float t = sigma_c > 0.0f ? -log(1.0f - u_dist) / sigma_c : INFINITY;
+    float t = sigma_c > 0.0f ? -log_pos(1.0f - u_dist) / sigma_c : INFINITY;
     ms.scattered = t < t_max;
     ms.t = ms.scattered ? t : t_max;
     float3 rel = transmittance_exp(sigma_t - sigma_ref, ms.t);
@@ -65,10 +69,11 @@ inline MediumSample medium_sample_distance(__global const Medium *m, float t_max
 #else
     /* grey extinction: the exponentials cancel exactly against the pdf */
     float sigma = sigma_t.x;
-    float t = sigma > 0.0f ? -log(1.0f - u_dist) / sigma : INFINITY;
+    float t = sigma > 0.0f ? -log_pos(1.0f - u_dist) / sigma : INFINITY;
     ms.scattered = t < t_max;
     ms.t = ms.scattered ? t : t_max;
     ms.weight = ms.scattered ? albedo : (float3)(1.0f);
+    if (ms.scattered) ms.tr = 1.0f - u_dist;
 #if VOLCL_HAS_EMISSIVE_MEDIA
     if (ms.scattered) ms.emission = vload_f3(m->emission) / sigma;
 #endif
@@ -159,7 +164,7 @@ inline bool medium_emits(__global const Medium *m) {
 /* Exponential optical depth to the next tentative collision (u < 1, so always finite). The
  * variates are multiples of 2^-24 (rng.h), so 1 - u is exact and log(1 - u) is log1p(-u) up to
  * the log's own rounding, at a lower cost than log1p. */
-inline float medium_sample_tau(Rng *rng) { return -log(1.0f - rng_next_float(rng)); }
+inline float medium_sample_tau(Rng *rng) { return -log_pos(1.0f - rng_next_float(rng)); }
 
 /* The majorant walk both trackers share: tentative collisions along a segment through an extinction
  * grid, drawn from the piecewise-constant majorant of the cells the ray crosses (grid.h). The
@@ -228,6 +233,7 @@ inline MediumSample medium_grid_sample_distance(const SceneData *sc, __global co
     ms.scattered = false;
     ms.weight = (float3)(1.0f);
     ms.emission = (float3)(0.0f);
+    ms.tr = -1.0f;
     __global const GridVolume *v = &sc->grids[m->sigma_t_grid];
     MajorantWalk walk;
     if (!majorant_walk_begin(sc, v, o, d, t_max, rng, &walk)) return ms;

@@ -1,4 +1,4 @@
-"""kernels/trig.h: the short polynomials the samplers use for azimuths, against float64."""
+"""kernels/trig.h: the short polynomials the samplers use for azimuths and free flights, against float64."""
 import numpy as np
 import pytest
 
@@ -28,3 +28,20 @@ def test_sin_and_cos_of_turns_are_within_two_ulps(cl_env, prog):
         err = np.abs(got.astype(np.float64) - want) / ulp
         assert err.max() <= 2.0, (err.max(), u[np.argmax(err)])
     assert np.all(np.abs(s) <= 1.0) and np.all(np.abs(c) <= 1.0)
+
+
+def test_log_of_one_minus_a_variate_is_within_one_ulp(cl_env, prog):
+    """log_pos(1 - u), the free flights' optical depth, for every u = k 2^-24 the random number
+    generator makes (all 2^24 of them: 1 - u is exact), and for normal numbers across the whole
+    float range, against float64 in units of the result's last place; log_pos(1) is exactly 0."""
+    x = (1.0 - np.arange(0, 2 ** 24) * 2.0 ** -24).astype(np.float32)
+    rng = np.random.default_rng(5)
+    wide = (2.0 ** rng.uniform(-125, 127, 100_000)).astype(np.float32)
+    for inputs in (x, wide):
+        (got,) = run_kernel(cl_env, prog, "trig_log", len(inputs), [(np.float32, ())], inputs=[inputs])
+        want = np.log(inputs.astype(np.float64))
+        ulp = np.spacing(np.maximum(np.abs(want), np.finfo(np.float32).tiny).astype(np.float32)).astype(np.float64)
+        err = np.abs(got.astype(np.float64) - want) / ulp
+        assert err.max() <= 1.0, (err.max(), inputs[np.argmax(err)])
+    (one,) = run_kernel(cl_env, prog, "trig_log", 1, [(np.float32, ())], inputs=[np.float32([1.0])])
+    assert one[0] == 0.0

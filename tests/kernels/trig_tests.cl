@@ -1,4 +1,5 @@
-/* Test-only kernel for kernels/trig.h: sin and cos of whole turns, as the samplers use them. */
+/* Test-only kernels for kernels/trig.h: sin and cos of whole turns, as the samplers use them, and the
+ * free flights' log. */
 #include "types.h"
 #include "common.h"
 #include "trig.h"
@@ -8,4 +9,9 @@ VOLCL_KERNEL void trig_turn(__global const float *u, __global float *sin_out, __
     float c;
     sin_out[i] = sincos_turn(u[i], &c);
     cos_out[i] = c;
+}
+
+VOLCL_KERNEL void trig_log(__global const float *x, __global float *out) {
+    int i = get_global_id(0);
+    out[i] = log_pos(x[i]);
 }
