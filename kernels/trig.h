@@ -1,9 +1,10 @@
-/* Sines, cosines and arctangents of arguments whose range the caller knows: short polynomials
- * (Cephes' single-precision minimax coefficients, within 2 ulp of the true values) after an exact
- * or two-part reduction. They cost a fraction of the library's atan2, sin and cos, which handle
- * every argument: on PoCL's CPU device those were a third of a sample's time in a fog lit by a
- * point light (equiangular sampling, angles in (0, pi)), and the azimuths of the direction samplers
- * (whole turns, sincos_turn) cost 4 to 10% of a render (README, "Throughput"). */
+/* Sines, cosines, arctangents and the free flights' logarithm, for arguments whose range the caller
+ * knows: short polynomials (Cephes' single-precision minimax coefficients, within 2 ulp of the true
+ * values) after an exact or two-part reduction. They cost a fraction of the library's atan2, sin,
+ * cos and log, which handle every argument: on PoCL's CPU device those were a third of a sample's
+ * time in a fog lit by a point light (equiangular sampling, angles in (0, pi)), and the azimuths of
+ * the direction samplers (whole turns, sincos_turn) cost 4 to 10% of a render (README,
+ * "Throughput"). */
 #ifndef VOLCL_TRIG_H
 #define VOLCL_TRIG_H
 
