@@ -68,7 +68,6 @@ inline int camera_start_medium(const SceneData *sc, float3 *o, float3 d, float *
  * heterogeneous media an unbiased ratio-tracking estimate, which draws from rng; tracking cut-offs
  * are counted in *cutoffs). *end_medium: the medium at the segment's far end; *last_segment: the
  * length of its last medium segment, from the boundary it entered that medium at (emission NEE). */
-__attribute__((always_inline))
 inline float3 shadow_transmittance_to(const SceneData *sc, float3 o, float3 w, float t_max, int medium, Rng *rng,
                                       uint *cutoffs, int *end_medium, float *last_segment) {
     *end_medium = -2;       /* no medium: the segment was blocked before its end */
@@ -325,8 +324,9 @@ inline EquiangularSegmentState equiangular_begin(const SceneData *sc, Rng *rng, 
 }
 
 /* The equiangular sample's estimate of D_k for the light it picks, before the factor beta. This, the
- * distance sample's weight, the segment set-up and sampler, the shadow query and phase_sample are
- * always inlined: PoCL left them out of line, passing the segment's state through memory. */
+ * distance sample's weight and the segment set-up and sampler are always inlined: PoCL left them
+ * out of line, passing the segment's state through memory. (The shadow query and phase_sample,
+ * forced inline too, made the Nori fog box 5% slower: they have other callers.) */
 __attribute__((always_inline))
 inline float3 equiangular_direct(const SceneData *sc, Rng *rng, EquiangularSegmentState *es,
                                  __global const Medium *m, int medium, uint *cutoffs) {

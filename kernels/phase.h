@@ -85,7 +85,6 @@ inline float phase_eval(const SceneData *sc, __global const Medium *m, float3 d_
 
 /* New travel direction after scattering from d_in, from the uniform pair u (and, for phase
  * functions that need more random numbers, rng); returns its pdf, *weight = value / pdf. */
-__attribute__((always_inline))
 inline float phase_sample(const SceneData *sc, __global const Medium *m, float3 d_in, float2 u, Rng *rng,
                           float3 *d_out, float *weight) {
 #if VOLCL_HAS_PHASE_FAMILIES
