@@ -9,6 +9,17 @@
 #define VOLCL_TRAVERSE_CAT2(a, b) a##b
 #define VOLCL_TRAVERSE_CAT(a, b) VOLCL_TRAVERSE_CAT2(a, b)
 #define VOLCL_TRAVERSE_LEAVES VOLCL_TRAVERSE_CAT(VOLCL_TRAVERSE_NAME, _leaves)
+#define VOLCL_TRAVERSE_PACKET VOLCL_TRAVERSE_CAT(VOLCL_TRAVERSE_NAME, _packet)
+
+/* One leaf packet, its triangles and then its analytic lanes: 0, 1 or 2 as the traversal returns. */
+__attribute__((always_inline))
+inline int VOLCL_TRAVERSE_PACKET(const SceneData *sc, __global const LeafPacket *pk, const Shear *sh, float3 o,
+                                 float3 d, int mode, Hit *hit) {
+    int h = packet_triangles_intersect(pk, sh, hit->t, mode, hit);
+    if (h == 2) return 2;
+    int ha = VOLCL_TRAVERSE_LEAF(sc, pk, o, d, mode, hit);
+    return ha == 2 ? 2 : h | ha;
+}
 
 /* The packets of leaf reference ref (< 0) against the query: 0, 1 or 2 as the traversal returns. */
 __attribute__((always_inline))
@@ -18,12 +29,9 @@ inline int VOLCL_TRAVERSE_LEAVES(const SceneData *sc, int ref, const Shear *sh, 
     int first = leaf >> 4, end = first + (leaf & 15) + 1;
     int found = 0;
     for (int i = first; i < end; ++i) {
-        __global const LeafPacket *pk = &sc->leaves[i];
-        int h = packet_triangles_intersect(pk, sh, hit->t, mode, hit);
+        int h = VOLCL_TRAVERSE_PACKET(sc, &sc->leaves[i], sh, o, d, mode, hit);
         if (h == 2) return 2;
-        int ha = VOLCL_TRAVERSE_LEAF(sc, pk, o, d, mode, hit);
-        if (ha == 2) return 2;
-        found |= h | ha;
+        found |= h;
     }
     return found != 0;
 }
@@ -49,13 +57,8 @@ inline int VOLCL_TRAVERSE_NAME(const SceneData *sc, int root, float3 o, float3 d
     __global const BvhWideNode *rn = &sc->nodes[root];
     if (rn->child[0] < 0 && rn->child[1] == 0) {
         int leaf = ~rn->child[0];
-        if ((leaf & 15) == 0) {     /* one packet: its test alone, without the loop's spilled state */
-            __global const LeafPacket *pk = &sc->leaves[leaf >> 4];
-            int h = packet_triangles_intersect(pk, &sh, hit->t, mode, hit);
-            if (h == 2) return 2;
-            int ha = VOLCL_TRAVERSE_LEAF(sc, pk, o, d, mode, hit);
-            return ha == 2 ? 2 : (h | ha) != 0;
-        }
+        /* one packet: its test alone, without the loop's spilled state */
+        if ((leaf & 15) == 0) return VOLCL_TRAVERSE_PACKET(sc, &sc->leaves[leaf >> 4], &sh, o, d, mode, hit);
         return VOLCL_TRAVERSE_LEAVES(sc, rn->child[0], &sh, o, d, mode, hit);
     }
     int ref = root;         /* the node or leaf visited now: the root first */
@@ -119,3 +122,4 @@ inline int VOLCL_TRAVERSE_NAME(const SceneData *sc, int root, float3 o, float3 d
 #undef VOLCL_TRAVERSE_NAME
 #undef VOLCL_TRAVERSE_LEAF
 #undef VOLCL_TRAVERSE_LEAVES
+#undef VOLCL_TRAVERSE_PACKET
