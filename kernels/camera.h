@@ -1,6 +1,8 @@
 /* Cameras with Mitsuba's and Nori's conventions: camera space looks down +z with +x to the left of
  * the image and +y up; pixel (0, 0) is the top-left corner. The reconstruction filter is importance
- * sampled: each sample lands at an offset distributed like the filter, weight one.
+ * sampled: each sample lands at an offset distributed like the filter, weight one; unless the
+ * film's sample_border is set, as Mitsuba's default and Nori, the filter is cut off at the image's
+ * edge.
  *
  * Image coordinates (sx, sy) in [0, 1]^2, shifted by Mitsuba's principal point offset, map to the
  * point ((1 - 2 sx) tan_half.x, (1 - 2 sy) tan_half.y, 1) of camera space:
@@ -16,10 +18,15 @@
 inline void camera_ray(const SceneData *sc, __global const float *filter_table, int px, int py, float2 u,
                        float2 u_lens, float3 *o, float3 *d, float *t_max) {
     __global const RenderParams *rp = sc->params;
-    float fx = sample_filter_offset(filter_table, rp->filter_size, rp->filter_radius, u.x);
-    float fy = sample_filter_offset(filter_table, rp->filter_size, rp->filter_radius, u.y);
-    float sx = ((float)px + 0.5f + fx) / (float)rp->width + rp->principal_point[0];
-    float sy = ((float)py + 0.5f + fy) / (float)rp->height + rp->principal_point[1];
+    /* without sample_border, offsets keep the sample on the image (pixel centre: px + 0.5, py + 0.5) */
+    float r = rp->filter_radius, cx = (float)px + 0.5f, cy = (float)py + 0.5f;
+    int whole = rp->sample_border;
+    float fx = sample_filter_offset_within(filter_table, rp->filter_size, r, u.x, whole ? -r : -cx,
+                                           whole ? r : (float)rp->width - cx);
+    float fy = sample_filter_offset_within(filter_table, rp->filter_size, r, u.y, whole ? -r : -cy,
+                                           whole ? r : (float)rp->height - cy);
+    float sx = (cx + fx) / (float)rp->width + rp->principal_point[0];
+    float sy = (cy + fy) / (float)rp->height + rp->principal_point[1];
     float3 dc = (float3)((1.0f - 2.0f * sx) * rp->tan_half[0], (1.0f - 2.0f * sy) * rp->tan_half[1], 1.0f);
     __global const float *m = rp->cam_to_world;
 #if VOLCL_HAS_ORTHOGRAPHIC

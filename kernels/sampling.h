@@ -82,4 +82,24 @@ inline float sample_filter_offset(const __global float *table, int size, float r
     return radius * (2.0f * ((float)k + f) / (float)n - 1.0f);
 }
 
+/* The table's CDF at offset x, linear within an interval as sample_filter_offset inverts it. */
+inline float filter_cdf_at(const __global float *table, int size, float radius, float x) {
+    int n = size - 1;
+    float t = clamp((x / radius + 1.0f) * 0.5f * (float)n, 0.0f, (float)n);
+    int k = min((int)t, n - 1);
+    return mix(table[k], table[k + 1], t - (float)k);
+}
+
+/* An offset distributed like the filter cut to [lo, hi] and renormalized: Mitsuba's film (without
+ * sample_border) and Nori's draw no samples outside the image, so a pixel within the filter's
+ * radius of the edge averages only the part of its filter that lies inside. Mapping u into that
+ * part's share of the CDF samples the table's own distribution restricted to it. */
+inline float sample_filter_offset_within(const __global float *table, int size, float radius, float u,
+                                         float lo, float hi) {
+    if (lo <= -radius && hi >= radius) return sample_filter_offset(table, size, radius, u);
+    float c0 = lo > -radius ? filter_cdf_at(table, size, radius, lo) : 0.0f;
+    float c1 = hi < radius ? filter_cdf_at(table, size, radius, hi) : 1.0f;
+    return clamp(sample_filter_offset(table, size, radius, mix(c0, c1, u)), lo, hi);
+}
+
 #endif

@@ -366,7 +366,8 @@ typedef struct {
     int integrator;         /* INTEGRATOR_* */
     int emission_table;     /* emission NEE: offset in grid_data of its table of media (volcl/emission_sampler.py), or -1 */
     int emission_nee;       /* emission NEE on (1) or off (0); read only by VOLCL_HAS_EMISSION_NEE builds */
-    int pad0[2];
+    int sample_border;      /* 1: pixels at the image's edge sample their whole filter (Mitsuba's hdrfilm) */
+    int pad0;
 } RenderParams;
 
 #endif

@@ -185,6 +185,38 @@ def test_filter_offset_follows_filter_profile(cl_env, prog, f):
     stats.chi2_1d(x, filter_profile(f), -f.radius, hi, bins=51, what=f"filter offsets vs the {f.kind} profile")
 
 
+# A pixel within the filter's radius of the image's edge (Mitsuba's film without sample_border):
+# its centre 0.5 or 1.5 pixels from one edge, or an image one pixel wide (both sides cut).
+CUTS = [(-0.5, None), (-1.5, None), (None, 0.5), (-0.5, 0.5), (-0.3, 0.2)]
+
+
+@pytest.mark.parametrize("cut", CUTS, ids=lambda c: f"{c[0]}..{c[1]}")
+@pytest.mark.parametrize("f", FILTERS, ids=FILTER_IDS)
+def test_filter_offset_within_follows_the_cut_profile(cl_env, prog, f, cut):
+    """sample_filter_offset_within draws from the filter's part inside [lo, hi], renormalized."""
+    r = f.radius
+    lo, hi = (-r if cut[0] is None else cut[0]), (r if cut[1] is None else cut[1])
+    lo, hi = max(lo, -r), min(hi, r)
+    table = filter_table(f)
+    (x,) = run_kernel(cl_env, prog, "warp_filter_offset_within", N, [(f32, ())], u32(19), i32(filter_cdf_size(table)),
+                      f32(r), f32(lo), f32(hi), inputs=[table])
+    assert x.min() >= np.float32(lo) and x.max() <= np.float32(hi)
+    profile = filter_profile(f)
+    mass = stats.integral_1d(profile, lo, hi)
+    top = float(np.nextafter(np.float32(hi), np.float32(np.inf)))
+    stats.chi2_1d(x, lambda t: profile(t) / mass, lo, top, bins=41,
+                  what=f"filter offsets within [{lo}, {hi}] vs the cut {f.kind} profile")
+
+
+def test_filter_offset_within_the_whole_filter_is_the_plain_offset(cl_env, prog):
+    """Bounds at or beyond the radius cut nothing: the same offsets, bit for bit."""
+    f = FILTERS[2]
+    table, plain = sample_filter(cl_env, prog, f, 20)
+    (x,) = run_kernel(cl_env, prog, "warp_filter_offset_within", N, [(f32, ())], u32(20), i32(filter_cdf_size(table)),
+                      f32(f.radius), f32(-f.radius), f32(f.radius), inputs=[table])
+    assert np.array_equal(x, plain)
+
+
 # ---- free-flight distances --------------------------------------------------------------------
 
 

@@ -213,13 +213,13 @@ def test_thinlens_and_orthographic(tmp_path):
 def test_machinery_parameters_warn_with_what_volcl_does(tmp_path):
     body = ('<integrator type="volpath"><float name="timeout" value="10"/><integer name="samples_per_pass" value="4"/>'
             '</integrator><sensor type="perspective"><float name="shutter_close" value="1"/>'
-            '<film type="hdrfilm"><boolean name="sample_border" value="true"/>'
+            '<film type="hdrfilm">'
             '<string name="component_format" value="float16"/><integer name="crop_width" value="4"/></film></sensor>'
             '<shape type="cube"><medium type="homogeneous" name="interior"><boolean name="sample_emitters" '
             'value="false"/><boolean name="has_spectral_extinction" value="false"/></medium></shape>')
     warnings = "\n".join(scene(tmp_path, body).warnings)
     for name, fragment in [("timeout", "--time-limit"), ("samples_per_pass", "passes"), ("shutter_close", "still"),
-                           ("sample_border", "border"), ("component_format", "float32"), ("crop_width", "whole film"),
+                           ("component_format", "float32"), ("crop_width", "whole film"),
                            ("sample_emitters", "same"), ("has_spectral_extinction", "same image")]:
         assert f"'{name}'" in warnings and fragment in warnings, (name, warnings)
 

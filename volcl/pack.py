@@ -544,6 +544,7 @@ class Packer:
         params["env_light"] = self.env_light
         params["filter_size"] = FILTER_TABLE_SIZE
         params["filter_radius"] = cam.rfilter.radius
+        params["sample_border"] = int(cam.sample_border)
         params["seed"] = self.scene.seed & 0xFFFFFFFF
         params["nee"], params["mis"] = 1, 1
         params["majorant_scale"] = 1.0

@@ -71,6 +71,13 @@ VOLCL_KERNEL void warp_filter_offset(__global const float *table, __global float
     offset[i] = sample_filter_offset(table, size, radius, rng_next_float(&r));
 }
 
+VOLCL_KERNEL void warp_filter_offset_within(__global const float *table, __global float *offset, uint seed, int size,
+                                        float radius, float lo, float hi) {
+    int i = get_global_id(0);
+    Rng r = rng_init(seed, i, 0);
+    offset[i] = sample_filter_offset_within(table, size, radius, rng_next_float(&r), lo, hi);
+}
+
 /* ---- media.h ---- */
 
 VOLCL_KERNEL void medium_distance(__global const Medium *m, __global float *t, __global int *scattered,

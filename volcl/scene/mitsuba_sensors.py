@@ -6,6 +6,9 @@
 - thinlens: the same plus `aperture_radius` and `focus_distance` (default: the far clip distance).
 - orthographic: looks along +z from the plane z = near_clip of its frame, over x in [-1, 1] and y in
   [-1/aspect, 1/aspect]; to_world may scale that frame.
+- hdrfilm: `width`, `height`, its rfilter, `sample_border` (off, Mitsuba's default: no samples
+  outside the film, so a pixel within the filter's radius of the edge averages only the filter's
+  part inside it; on: every pixel's whole filter).
 """
 from __future__ import annotations
 
@@ -31,9 +34,6 @@ _FILM_NOTES = {
     "file_format": "the output's extension (.exr or .png) decides the format",
     "compensate": "volcl accumulates per-pixel sums in float32 on the device and adds them up in float64",
     "banner": "volcl writes no banner",
-    "sample_border": "volcl samples every pixel's reconstruction filter in full (its expected image is "
-                     "Mitsuba's with sample_border=true; pixels at the image border differ slightly "
-                     "from Mitsuba's default false)",
     **{name: "volcl renders the whole film (no crop window)" for name in
        ("crop_offset_x", "crop_offset_y", "crop_width", "crop_height")},
 }
@@ -48,7 +48,8 @@ SPECS = {
         "orthographic": Spec({"near_clip": "float", "far_clip": "float", **_TO_WORLD},
                              children=_SENSOR_CHILDREN, ignored=_SHUTTER),
     },
-    "film": {"hdrfilm": Spec({"width": "int", "height": "int"}, children=frozenset({"rfilter"}),
+    "film": {"hdrfilm": Spec({"width": "int", "height": "int", "sample_border": "bool"},
+                             children=frozenset({"rfilter"}),
                              ignored=_FILM_NOTES)},
     "rfilter": {"box": Spec(), "gaussian": Spec({"stddev": "float"}),
                 "tent": Spec({"radius": "float"})},
@@ -72,6 +73,8 @@ class Film:
     height: int = 576
     # Mitsuba's default reconstruction filter: gaussian, stddev 0.5, radius 4 * stddev.
     rfilter: Filter = field(default_factory=lambda: Filter("gaussian", radius=2.0, stddev=0.5))
+    # off: no samples outside the film, so a pixel near its edge sees only its filter's inside part
+    sample_border: bool = False
 
 
 def _fov(node: Node) -> tuple[float, str]:
@@ -122,6 +125,7 @@ def build_sensor(node: Node) -> Sensor:
     elif kind == "thinlens":
         _thin_lens(node, camera, far)
     camera.medium = medium.obj if medium else None
+    camera.sample_border = film.sample_border
     camera.id = node.element.attrs.get("id", "")
     return Sensor(camera, sampler.sample_count, sampler.seed, node.source())
 
@@ -145,7 +149,7 @@ def _thin_lens(node: Node, camera, far: float) -> None:
 
 def build_film(node: Node) -> Film:
     rfilter = node.single("rfilter")
-    film = Film(node.int("width", 768), node.int("height", 576))
+    film = Film(node.int("width", 768), node.int("height", 576), sample_border=node.bool("sample_border", False))
     if rfilter is not None:
         film.rfilter = rfilter.obj
     for name in ("width", "height"):

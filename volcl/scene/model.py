@@ -262,6 +262,9 @@ class Camera:
     near_clip: float = 1e-2
     far_clip: float = 1e4
     rfilter: Filter = field(default_factory=Filter)
+    # Mitsuba's hdrfilm sample_border: pixels at the image's edge sample their whole filter; off (its
+    # default, and Nori's only way) cuts the filter at the edge
+    sample_border: bool = False
     medium: Optional[Medium] = None
     principal_point: tuple = (0.0, 0.0)   # Mitsuba's principal_point_offset_x/y, in image fractions
     aperture_radius: float = 0.0     # thin lens
