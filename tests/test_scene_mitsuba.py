@@ -136,6 +136,17 @@ def test_missing_integrator_warns_and_uses_volpathmis(tmp_path):
     assert any("no <integrator>" in w for w in s.warnings)
 
 
+@pytest.mark.parametrize("kind, kernel_rr_depth", [("path", 3), ("volpath", 4), ("volpathmis", 4)])
+def test_roulette_starts_where_mitsubas_integrator_starts_it(tmp_path, kind, kernel_rr_depth):
+    """The kernel plays roulette after a bounce that brings the depth to its rr_depth. Mitsuba's
+    path does so at the file's rr_depth; volpath and volpathmis test depth > rr_depth at the top
+    of their loop, one bounce later."""
+    from volcl.pack import pack
+    s = scene(tmp_path, f'<integrator type="{kind}"><integer name="rr_depth" value="3"/></integrator>' + SENSOR)
+    assert s.integrator.rr_depth == 3
+    assert int(pack(s).params["rr_depth"]) == kernel_rr_depth
+
+
 def test_sensor_defaults(tmp_path):
     s = scene(tmp_path, '<integrator type="path"/><sensor type="perspective"/>')
     cam = s.camera

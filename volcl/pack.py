@@ -182,6 +182,18 @@ def hide_emitters_mode(scene: Scene) -> str:
     return "skip" if scene.dialect == "mitsuba" and integ.kind in ("path", "volpath", "direct") else "dark"
 
 
+def roulette_depth(scene: Scene) -> int:
+    """The kernel's rr_depth: it plays Russian roulette after a bounce that brings the path's depth
+    to rr_depth or more (kernels/integrator.h path_roulette), as Mitsuba's path integrator does.
+    Mitsuba's volpath and volpathmis test depth > rr_depth at the top of their loop instead
+    (src/integrators/volpath.cpp, volpathmis.cpp in 3.9), one bounce later: every path gets one
+    more segment before its first roulette, the same expected image with less noise at more cost
+    per sample (point_in_fog: 14% more medium events, 13% more kernel instructions)."""
+    integ = scene.integrator
+    late = scene.dialect == "mitsuba" and integ.kind in ("volpath", "volpathmis")
+    return integ.rr_depth + 1 if late else integ.rr_depth
+
+
 def camera_tangents(cam: Camera) -> tuple[float, float]:
     """tan(fov/2) along x and y from Mitsuba's fov_axis rules; (1, height / width) for an
     orthographic camera, whose frame spans x in [-1, 1]."""
@@ -534,7 +546,7 @@ class Packer:
         params["principal_point"] = cam.principal_point
         integ = self.scene.integrator
         params["max_depth"] = integ.max_depth
-        params["rr_depth"] = integ.rr_depth
+        params["rr_depth"] = roulette_depth(self.scene)
         params["hide_emitters"] = layout.HIDE_EMITTERS[hide_emitters_mode(self.scene)]
         params["emitter_samples"], params["bsdf_samples"] = integ.emitter_samples, integ.bsdf_samples
         params["integrator"] = layout.INTEGRATORS["direct" if integ.kind == "direct" else "path"]
