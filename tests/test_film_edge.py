@@ -14,24 +14,20 @@ import pytest
 
 import stats
 import volcl
+from test_sampling import filter_profile
+from volcl.scene.model import Filter
+
+pytestmark = pytest.mark.every_implementation
 
 W, H, SPP = 24, 16, 1024
 PIXEL = 2.0 / W                  # the orthographic frame spans x in [-1, 1], y in [-H/W, H/W]
 INSIDE = 0.25                    # pixels of the emitter inside the image's edge
 
 
-def profile(kind, radius, stddev=0.5):
-    """The filter's (unnormalized) 1D weight, as Mitsuba's rfilters define it."""
-    if kind == "tent":
-        return lambda x: np.maximum(0.0, 1.0 - np.abs(x) / radius)
-    floor = math.exp(-radius * radius / (2 * stddev * stddev))
-    return lambda x: np.maximum(0.0, np.exp(-x * x / (2 * stddev * stddev)) - floor) * (np.abs(x) <= radius)
-
-
 def expected(kind, radius, k, sample_border):
     """Chance that pixel k's sample (k pixels from the emitter's edge of the image) lands on the
     emitter, which covers offsets below -(k + 0.5) + INSIDE from the pixel's centre."""
-    w = profile(kind, radius)
+    w = filter_profile(Filter(kind, radius, 0.5))
     lo = -radius if sample_border else max(-radius, -(k + 0.5))
     lit = -(k + 0.5) + INSIDE
     if lit <= lo:
