@@ -16,6 +16,8 @@
  *   nodes   (W + 1) H    luminance x sin(theta) per texel, the first column repeated at the end
  *   cond    W (H - 1)    per row of patches, the normalized CDF of the patch masses (mean of 4 nodes)
  *   marg    H - 1        the normalized CDF of the rows' masses
+ *   guides  W (H - 1)    per row, where the search of cond starts (sample_discrete_cdf_guided)
+ *           H - 1        the same for marg
  * Density: a patch is picked with the probability its two CDF steps give, then a point in it with the
  * density of the bilinear interpolant of its nodes. The pdf is evaluated from the same CDF steps, so
  * it is the sampler's own density even where float32 rounding makes a step differ from the patch's
@@ -34,10 +36,10 @@ typedef struct {
 /* The patch of a unit direction in the map's frame, whose sin(theta) is sin_theta. */
 inline EnvPatch envmap_patch(__global const Light *l, float3 d, float sin_theta) {
     int w = l->env_res[0], h = l->env_res[1];
-    float u = atan2(d.x, -d.z) * (0.5f * VOLCL_INV_PI);
+    float u = atan2_full(d.x, -d.z) * (0.5f * VOLCL_INV_PI);
     /* not acos(d.y): near the poles a float32 d.y holds theta to only ~ulp / sin(theta) (0.5% of
      * the first row's patch at 0.2 degrees from the pole of a 6-row map) */
-    float v = atan2(sin_theta, d.y) * VOLCL_INV_PI;
+    float v = atan2_upper(sin_theta, d.y) * VOLCL_INV_PI;
     float x = u * (float)w - 0.5f;
     if (x < 0.0f) x += (float)w;
     EnvPatch p;
@@ -115,21 +117,26 @@ inline bool envmap_sample(const SceneData *sc, __global const Light *l, float2 u
     __global const float *node = sc->env_data + l->env_data + 3 * w * h;
     __global const float *cond = node + (w + 1) * h;
     __global const float *marg = cond + w * (h - 1);
+    __global const float *cond_guide = marg + (h - 1);
+    __global const float *marg_guide = cond_guide + w * (h - 1);
     EnvPatch p;
-    p.j = sample_discrete_cdf(marg, h - 1, u.y);
+    p.j = sample_discrete_cdf_guided(marg, marg_guide, h - 1, u.y);
     float uy = cdf_remap(u.y, p.j > 0 ? marg[p.j - 1] : 0.0f, marg[p.j]);
     __global const float *row = cond + p.j * w;
-    p.i = sample_discrete_cdf(row, w, u.x);
+    p.i = sample_discrete_cdf_guided(row, cond_guide + p.j * w, w, u.x);
     float ux = cdf_remap(u.x, p.i > 0 ? row[p.i - 1] : 0.0f, row[p.i]);
     __global const float *n0 = node + p.j * (w + 1) + p.i;
     __global const float *n1 = n0 + (w + 1);
     /* the bilinear patch: its marginal in t, then s given t */
     p.t = sample_linear(uy, n0[0] + n0[1], n1[0] + n1[1]);
     p.s = sample_linear(ux, mix(n0[0], n1[0], p.t), mix(n0[1], n1[1], p.t));
-    float phi = (2.0f * VOLCL_PI) * (((float)p.i + p.s + 0.5f) / (float)w);
+    /* the azimuth in turns, in [0, 1 + 1/(2 w)): sincos_turn's exact quarter-turn reduction holds
+     * to 1.125 */
+    float turns = ((float)p.i + p.s + 0.5f) / (float)w;
     float theta = VOLCL_PI * (((float)p.j + p.t) / (float)(h - 1));
-    float sin_t = sin(theta), cos_t = cos(theta);
-    float3 dl = (float3)(sin(phi) * sin_t, cos_t, -cos(phi) * sin_t);
+    float cos_t, sin_t = sincos_upper(theta, &cos_t);
+    float cos_p, sin_p = sincos_turn(turns, &cos_p);
+    float3 dl = (float3)(sin_p * sin_t, cos_t, -cos_p * sin_t);
     *pdf = envmap_patch_pdf(sc, l, p, sin_t);
     if (!(*pdf > 0.0f)) return false;
     *wi = mat3_apply_transposed(l->to_local, dl);

@@ -63,6 +63,16 @@ inline int sample_discrete_cdf(const __global float *cdf, int n, float u) {
     return lo;
 }
 
+/* The same index, searched from guide[(int)(u n)] (a start near it, volcl.envmap.guide): the walk
+ * back and then forward ends at the first entry above u from any start, so the index is the binary
+ * search's, in a step or two on average. */
+inline int sample_discrete_cdf_guided(const __global float *cdf, const __global float *guide, int n, float u) {
+    int k = (int)guide[clamp((int)(u * (float)n), 0, n - 1)];
+    while (k > 0 && cdf[k - 1] > u) --k;
+    while (k < n - 1 && cdf[k] <= u) ++k;
+    return k;
+}
+
 /* Offset from a pixel centre distributed like the reconstruction filter along one axis. The host
  * tabulates the filter's normalized CDF at `size` equally spaced x in [-radius, radius]; inverting
  * it interval by interval samples each interval's exact share of the filter (sampling the filter,

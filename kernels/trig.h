@@ -26,6 +26,14 @@ inline float atan2_upper(float y, float x) {
     return x < 0.0f ? (3.1415927410125732f - a) - 8.742278000372485e-8f : a;
 }
 
+/* atan2(y, x) on the whole plane, by symmetry from atan2_upper; (0, 0) gives 0 as the library
+ * does (a pole direction, where the azimuth is arbitrary). */
+inline float atan2_full(float y, float x) {
+    if (y == 0.0f && x == 0.0f) return 0.0f;
+    float a = atan2_upper(fabs(y), x);
+    return y < 0.0f ? -a : a;
+}
+
 /* sin and cos of a on [-pi/4, pi/4] */
 inline float sin_small(float a) {
     float z = a * a;

@@ -126,6 +126,45 @@ def test_discrete_cdf(cl_env, prog, weights):
     stats.chi2_discrete(k, p, what=f"sample_discrete_cdf over {len(cdf)} entries")
 
 
+@pytest.mark.parametrize("n", [1, 2, 3, 7, 256, 511, 1000])
+@pytest.mark.parametrize("start", ["guide", "zero", "last", "random"])
+def test_discrete_cdf_index_is_the_first_entry_above_u(cl_env, prog, n, start):
+    """The index itself, not only its distribution, for the binary search and the guided one
+    (from volcl.envmap.guide's starts, and from starts at 0, at n - 1 and at random, which must
+    give the same index): the first entry greater than u, or n - 1, at u on, just below and just
+    above every entry (ties included: the repeated entries of zero-weight bins), at 0 and at the
+    largest u below 1."""
+    from volcl.envmap import guide
+    rng = np.random.default_rng(n)
+    w = rng.gamma(0.5, 1.0, n)
+    w[::5] = 0.0
+    w[-1] = max(w[-1], 1e-3)
+    cdf = host_cdf(w.tolist())
+    g = {"guide": guide(cdf), "zero": np.zeros(n, np.float32), "last": np.full(n, n - 1, np.float32),
+         "random": rng.integers(0, n, n).astype(np.float32)}[start]
+    u = np.concatenate([cdf, np.nextafter(cdf, np.float32(0)), np.nextafter(cdf, np.float32(2)),
+                        np.float32([0.0, 0.99999994])]).astype(np.float32)
+    u = u[u < 1.0]
+    plain, guided = run_kernel(cl_env, prog, "discrete_cdf_at", len(u), [(np.int32, ())] * 2, i32(n),
+                               inputs=[cdf, g, u])
+    want = np.minimum(np.searchsorted(cdf, u, side="right"), n - 1)
+    for name, k in (("binary", plain), ("guided", guided)):
+        bad = np.flatnonzero(k != want)
+        assert not bad.size, f"{name}: u={u[bad[:5]]}: index {k[bad[:5]]}, want {want[bad[:5]]}"
+
+
+def test_envmap_guide_starts_at_the_answer_for_its_bin():
+    """guide[g] is the index the search returns at u = g / n, row by row of a 2-d table."""
+    from volcl.envmap import guide
+    rng = np.random.default_rng(2)
+    cdf = np.stack([host_cdf(rng.gamma(0.3, 1.0, 64).tolist()) for _ in range(5)])
+    g = guide(cdf)
+    assert g.shape == cdf.shape and g.dtype == np.float32
+    at = np.arange(64) / 64
+    for row, gr in zip(cdf, g):
+        assert np.array_equal(gr, np.minimum(np.searchsorted(row, at, side="right"), 63))
+
+
 # ---- reconstruction filter --------------------------------------------------------------------
 
 FILTERS = [Filter("box", 0.5, 0.5), Filter("tent", 1.0, 0.5), Filter("gaussian", 2.0, 0.5),

@@ -88,14 +88,27 @@ def tables(texels: np.ndarray) -> tuple[np.ndarray, float]:
     marg = _normalized_cdf(rows)
     total = float(rows.sum())
     norm = w * (h - 1) / (2 * math.pi ** 2) if total > 0 else 0.0
-    data = np.concatenate([np.asarray(texels, np.float32).reshape(-1), f.reshape(-1),
-                           cond.astype(np.float32).reshape(-1), marg.astype(np.float32)])
+    cond, marg = cond.astype(np.float32), marg.astype(np.float32)
+    data = np.concatenate([np.asarray(texels, np.float32).reshape(-1), f.reshape(-1), cond.reshape(-1), marg,
+                           guide(cond).reshape(-1), guide(marg)])
     return data, norm
+
+
+def guide(cdf: np.ndarray) -> np.ndarray:
+    """Where the kernel's search of each float32 CDF (last axis, n entries) starts: entry g is the
+    first index whose CDF exceeds g / n (n - 1 if none does), as float32 (exact below 2^24). Any
+    start gives the same index (sample_discrete_cdf_guided walks to it); this one makes the walk a
+    step or two on average, where a binary search's random branches cost most of a sample."""
+    n = cdf.shape[-1]
+    at = np.arange(n, dtype=np.float64) / n
+    rows = np.asarray(cdf, np.float64).reshape(-1, n)
+    g = np.stack([np.searchsorted(r, at, side="right") for r in rows])
+    return np.minimum(g, n - 1).astype(np.float32).reshape(cdf.shape)
 
 
 def table_size(width: int, height: int) -> int:
     """Floats tables() writes for an image of this size (after padding)."""
-    return 3 * width * height + (width + 1) * height + width * (height - 1) + (height - 1)
+    return 3 * width * height + (width + 1) * height + 2 * (width * (height - 1) + (height - 1))
 
 
 # -- the same functions in float64, for tests and checks: directions in the envmap's own frame ------

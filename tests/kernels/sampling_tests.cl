@@ -64,6 +64,14 @@ VOLCL_KERNEL void warp_discrete_cdf(__global const float *cdf, __global int *ind
     index[i] = sample_discrete_cdf(cdf, n, rng_next_float(&r));
 }
 
+/* both searches at given u, the guided one from the guide table given */
+VOLCL_KERNEL void discrete_cdf_at(__global const float *cdf, __global const float *guide, __global const float *u,
+                                  __global int *plain, __global int *guided, int n) {
+    int i = get_global_id(0);
+    plain[i] = sample_discrete_cdf(cdf, n, u[i]);
+    guided[i] = sample_discrete_cdf_guided(cdf, guide, n, u[i]);
+}
+
 VOLCL_KERNEL void warp_filter_offset(__global const float *table, __global float *offset, uint seed, int size,
                                  float radius) {
     int i = get_global_id(0);

@@ -15,3 +15,8 @@ VOLCL_KERNEL void trig_log(__global const float *x, __global float *out) {
     int i = get_global_id(0);
     out[i] = log_pos(x[i]);
 }
+
+VOLCL_KERNEL void trig_atan2_full(__global const float *y, __global const float *x, __global float *out) {
+    int i = get_global_id(0);
+    out[i] = atan2_full(y[i], x[i]);
+}
