@@ -177,7 +177,9 @@ typedef struct {
 #define TEX_WRAP_CLAMP 2
 
 /* A texture (textures.h). Bitmaps: texel (x, y) channel c at texels[data + (y * width + x) *
- * channels + c], row 0 the image's top row, linear values. Checkerboards: child0/child1 are the
+ * channels + c], row 0 the image's top row, linear values; or, where lut >= 0 (a bitmap of at most
+ * 256 distinct values, as every 8-bit image is), texels[lut + b] for the byte b at that index of
+ * the bytes that start at texels + data. Checkerboards: child0/child1 are the
  * textures of color0/color1, or -1 for the constants color0/color1 (mean0/mean1 their channel
  * means, what a float parameter reads from them). to_uv maps the surface's uv first. */
 typedef struct {
@@ -190,7 +192,8 @@ typedef struct {
     int wrap;
     int child0;
     int child1;
-    int pad0[3];
+    int lut;
+    int pad0[2];
     float to_uv[6];         /* row-major 2x3 affine */
     float pad1[2];
     float color0[3];

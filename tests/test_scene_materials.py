@@ -162,7 +162,8 @@ def test_volpath_with_thin_dielectric_and_path_warning():
 
 def test_texels_count_towards_the_device_memory_check(tmp_path):
     from test_device import _small_device
-    write_image(tmp_path / "big.exr", np.zeros((64, 64, 3), np.float32))
+    # float texels (more than 256 values: not byte-coded)
+    write_image(tmp_path / "big.exr", np.random.default_rng(3).random((64, 64, 3)).astype(np.float32))
     sc = load_string(M.format('<shape type="sphere"><bsdf type="diffuse"><texture type="bitmap" name="reflectance">'
                               '<string name="filename" value="big.exr"/></texture></bsdf></shape>'), base_dir=tmp_path)
     p = pack(sc)

@@ -107,6 +107,42 @@ def test_bitmap_lookups_match_reference(cl_env, prog, filter, wrap, channels):
                                rtol=1e-5, atol=1e-5)
 
 
+@pytest.mark.parametrize("channels", [1, 3])
+@pytest.mark.parametrize("wrap", ["repeat", "mirror"])
+def test_byte_coded_texels_read_the_same_bits(cl_env, prog, channels, wrap, monkeypatch):
+    """A bitmap of at most 256 distinct values (an 8-bit image, sRGB-decoded: values that are not
+    multiples of anything) is stored as bytes into a table of its values: every lookup, colour,
+    float and bump gradient, gives the float32 storage's bits; one value more keeps floats."""
+    import volcl.pack_materials as pm
+    from volcl.scene.images import srgb_decode
+    rng = np.random.default_rng(14 + channels)
+    data = srgb_decode(rng.integers(0, 256, (37, 29, channels)) / 255.0).astype(np.float32)
+    tex = Texture("bitmap", data=data, wrap=wrap, to_uv=np.array([[1.3, 0.2, 0.1], [-0.1, 1.7, 0], [0, 0, 1]]))
+    arrays = MaterialPacker([Bsdf("diffuse", reflectance=tex)]).arrays()
+    r = arrays["textures"][0]
+    assert r["lut"] >= 0 and arrays["texels"].nbytes < data.nbytes / 2
+    uv = rng.uniform(-1.5, 2.5, (20000, 2))
+    coded = lookups(cl_env, prog, tex, uv)
+    monkeypatch.setattr(pm, "BYTE_CODED_MIN_VALUES", 10 ** 9)   # the same texture as floats
+    assert MaterialPacker([Bsdf("diffuse", reflectance=tex)]).arrays()["textures"][0]["lut"] == -1
+    plain = lookups(cl_env, prog, tex, uv)
+    for a, b in zip(coded, plain):
+        assert np.array_equal(a.view(np.uint32), b.view(np.uint32))
+
+
+def test_byte_coding_only_where_it_is_exact():
+    from volcl.pack_materials import byte_coded
+    rng = np.random.default_rng(15)
+    values = rng.random(256).astype(np.float32)
+    data = values[rng.integers(0, 256, (40, 40, 3))]
+    lut, words = byte_coded(data)
+    codes = words.view(np.uint8)[:data.size]
+    assert np.array_equal(lut[codes].view(np.uint32), data.reshape(-1).view(np.uint32))
+    data[0, 0, 0] = np.float32(2.0)                   # a 257th value
+    assert byte_coded(data) is None
+    assert byte_coded(values[:3][rng.integers(0, 3, (8, 8, 1))]) is None    # too small to pay
+
+
 def test_checkerboard_nested_and_swapped(cl_env, prog):
     """color0 where the fractional parts of u and v lie on the same side of 1/2 (colour reads),
     color1 there for float reads (Mitsuba's eval_1); a nested bitmap is read at the same uv."""

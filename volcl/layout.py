@@ -102,7 +102,7 @@ TEXTURE_WRAPS = {"repeat": 0, "mirror": 1, "clamp": 2}
 TEXTURE = np.dtype([
     ("type", np.int32), ("channels", np.int32), ("width", np.int32), ("height", np.int32),
     ("data", np.int32), ("filter", np.int32), ("wrap", np.int32), ("child0", np.int32),
-    ("child1", np.int32), ("pad0", np.int32, 3),
+    ("child1", np.int32), ("lut", np.int32), ("pad0", np.int32, 2),
     ("to_uv", np.float32, 6), ("pad1", np.float32, 2),
     ("color0", *f3), ("mean0", np.float32),
     ("color1", *f3), ("mean1", np.float32),

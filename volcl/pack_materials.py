@@ -65,6 +65,28 @@ def transmits(bsdf: Bsdf) -> bool:
     return bsdf.kind == "null" or passes(bsdf)
 
 
+# bitmaps of fewer values than this keep float32 texels: the table would outweigh the saving
+BYTE_CODED_MIN_VALUES = 1024
+
+
+def byte_coded(data: np.ndarray):
+    """(the 256-entry table of a bitmap's distinct float32 values, its texels as byte indices into
+    the table, packed four to a float32 word) or None where it has more than 256 distinct values
+    (a float image) or too few texels for it to pay. The kernel's lookup gives back the same bits
+    (an 8-bit image decodes to at most 256 values: its bytes, through sRGB or not)."""
+    flat = np.ascontiguousarray(data, np.float32).reshape(-1)
+    if flat.size < BYTE_CODED_MIN_VALUES:
+        return None
+    values, codes = np.unique(flat.view(np.uint32), return_inverse=True)
+    if len(values) > 256:
+        return None
+    lut = np.zeros(256, np.uint32)
+    lut[:len(values)] = values
+    packed = np.zeros(-(-flat.size // 4) * 4, np.uint8)
+    packed[:flat.size] = codes.reshape(-1)
+    return lut.view(np.float32), packed.view(np.float32)
+
+
 class MaterialPacker:
     """Indices of every bsdf record and texture of a scene (its structure), and their packing."""
 
@@ -194,8 +216,16 @@ class MaterialPacker:
                 r["channels"], r["width"], r["height"] = c, w, h
                 r["data"] = offset
                 r["filter"], r["wrap"] = layout.TEXTURE_FILTERS[t.filter], layout.TEXTURE_WRAPS[t.wrap]
-                texels.append(np.ascontiguousarray(t.data, np.float32).reshape(-1))
-                offset += t.data.size
+                coded = byte_coded(t.data)
+                r["lut"] = -1
+                if coded is not None:
+                    lut, words = coded
+                    r["lut"], r["data"] = offset, offset + len(lut)
+                    texels += [lut, words]
+                    offset += len(lut) + len(words)
+                else:
+                    texels.append(np.ascontiguousarray(t.data, np.float32).reshape(-1))
+                    offset += t.data.size
                 continue
             for k, value in enumerate((t.color0, t.color1)):
                 if isinstance(value, Texture):
