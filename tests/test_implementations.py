@@ -137,7 +137,8 @@ def test_choice_skips_a_failing_device_and_names_it(monkeypatch):
 
 
 def test_default_choice_prefers_pocl_among_cpu_devices(monkeypatch):
-    """Whatever order the loader lists platforms in (README: PoCL is the faster CPU runtime here)."""
+    """Whatever order the loader lists platforms in (README, "Throughput on each implementation":
+    why PoCL comes first)."""
     found = {implementation_id(d): d for d in implementations()}
     if not {"pocl", "intel"} <= set(found):
         pytest.skip("needs both PoCL and Intel's CPU runtime")

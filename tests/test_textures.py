@@ -123,7 +123,7 @@ def test_byte_coded_texels_read_the_same_bits(cl_env, prog, channels, wrap, monk
     assert r["lut"] >= 0 and arrays["texels"].nbytes < data.nbytes / 2
     uv = rng.uniform(-1.5, 2.5, (20000, 2))
     coded = lookups(cl_env, prog, tex, uv)
-    monkeypatch.setattr(pm, "BYTE_CODED_MIN_VALUES", 10 ** 9)   # the same texture as floats
+    monkeypatch.setattr(pm, "BYTE_CODED_MIN_SIZE", 10 ** 9)   # the same texture as floats
     assert MaterialPacker([Bsdf("diffuse", reflectance=tex)]).arrays()["textures"][0]["lut"] == -1
     plain = lookups(cl_env, prog, tex, uv)
     for a, b in zip(coded, plain):

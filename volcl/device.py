@@ -190,10 +190,12 @@ def check(dev: Device) -> tuple[bool, str]:
 
 
 def _preference(dev: Device) -> tuple:
-    """Default order: GPUs, then PoCL's CPU device, then other devices in platform order. On CPUs
-    PoCL rendered as fast as Intel's runtime or faster on every scene measured (README, "Throughput
-    on each implementation"), and the loader's platform order follows the order of files in a
-    folder, which is no order at all."""
+    """Default order: GPUs, then PoCL's CPU device, then other devices in platform order. On the
+    AVX2 hosts measured PoCL rendered as fast as Intel's runtime or faster on every scene (README,
+    "Throughput on each implementation"); on an AVX-512 host Intel's was 1.01-1.15x faster per CPU
+    second, but its first build of a feature set takes seconds, and the tests' default device is
+    PoCL. The loader's platform order follows the order of files in a folder, which is no order at
+    all."""
     return (dev.kind != "gpu", "portable computing language" not in dev.platform_name.lower())
 
 

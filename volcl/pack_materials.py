@@ -65,8 +65,9 @@ def transmits(bsdf: Bsdf) -> bool:
     return bsdf.kind == "null" or passes(bsdf)
 
 
-# bitmaps of fewer values than this keep float32 texels: the table would outweigh the saving
-BYTE_CODED_MIN_VALUES = 1024
+# bitmaps of fewer floats (texels times channels) than this keep float32 texels: the table of
+# 256 would outweigh the saving
+BYTE_CODED_MIN_SIZE = 1024
 
 
 def byte_coded(data: np.ndarray):
@@ -75,7 +76,7 @@ def byte_coded(data: np.ndarray):
     (a float image) or too few texels for it to pay. The kernel's lookup gives back the same bits
     (an 8-bit image decodes to at most 256 values: its bytes, through sRGB or not)."""
     flat = np.ascontiguousarray(data, np.float32).reshape(-1)
-    if flat.size < BYTE_CODED_MIN_VALUES:
+    if flat.size < BYTE_CODED_MIN_SIZE:
         return None
     values, codes = np.unique(flat.view(np.uint32), return_inverse=True)
     if len(values) > 256:
@@ -205,7 +206,7 @@ class MaterialPacker:
 
     def _textures(self):
         arr = np.zeros(max(len(self.textures), 1), layout.TEXTURE)
-        arr["child0"] = arr["child1"] = -1
+        arr["child0"] = arr["child1"] = arr["lut"] = -1
         texels, offset = [], 0
         for i, t in enumerate(self.textures):
             r = arr[i]
@@ -217,7 +218,6 @@ class MaterialPacker:
                 r["data"] = offset
                 r["filter"], r["wrap"] = layout.TEXTURE_FILTERS[t.filter], layout.TEXTURE_WRAPS[t.wrap]
                 coded = byte_coded(t.data)
-                r["lut"] = -1
                 if coded is not None:
                     lut, words = coded
                     r["lut"], r["data"] = offset, offset + len(lut)
