@@ -63,11 +63,12 @@ inline int sample_discrete_cdf(const __global float *cdf, int n, float u) {
     return lo;
 }
 
-/* The same index, searched from guide[(int)(u n)] (a start near it, volcl.envmap.guide): the walk
+/* The same index, searched from guide[(int)(u n)] (a start near it, volcl.guides.guide): the walk
  * back and then forward ends at the first entry above u from any start, so the index is the binary
  * search's, in a step or two on average. */
+__attribute__((always_inline))
 inline int sample_discrete_cdf_guided(const __global float *cdf, const __global float *guide, int n, float u) {
-    int k = (int)guide[clamp((int)(u * (float)n), 0, n - 1)];
+    int k = (int)guide[min((int)(u * (float)n), n - 1)];   /* u in [0, 1] */
     while (k > 0 && cdf[k - 1] > u) --k;
     while (k < n - 1 && cdf[k] <= u) ++k;
     return k;
@@ -83,10 +84,8 @@ inline int sample_discrete_cdf_guided(const __global float *cdf, const __global 
  * cost a fifth of a Cornell-box sample on PoCL). */
 inline float sample_filter_offset(const __global float *table, int size, float radius, float u) {
     int n = size - 1;
-    int k = (int)table[size + min((int)(u * (float)n), n - 1)];
-    /* u * n can round up into the next guide bin: step back as well as forward */
-    while (k > 0 && table[k] > u) --k;
-    while (k < n - 1 && table[k + 1] <= u) ++k;
+    /* interval k ends at the first CDF entry past table[0] = 0 that lies above u */
+    int k = sample_discrete_cdf_guided(table + 1, table + size, n, u);
     float lo = table[k], hi = table[k + 1];
     float f = hi > lo ? clamp((u - lo) / (hi - lo), 0.0f, 1.0f) : 0.5f;
     return radius * (2.0f * ((float)k + f) / (float)n - 1.0f);

@@ -130,11 +130,11 @@ def test_discrete_cdf(cl_env, prog, weights):
 @pytest.mark.parametrize("start", ["guide", "zero", "last", "random"])
 def test_discrete_cdf_index_is_the_first_entry_above_u(cl_env, prog, n, start):
     """The index itself, not only its distribution, for the binary search and the guided one
-    (from volcl.envmap.guide's starts, and from starts at 0, at n - 1 and at random, which must
+    (from volcl.guides.guide's starts, and from starts at 0, at n - 1 and at random, which must
     give the same index): the first entry greater than u, or n - 1, at u on, just below and just
     above every entry (ties included: the repeated entries of zero-weight bins), at 0 and at the
     largest u below 1."""
-    from volcl.envmap import guide
+    from volcl.guides import guide
     rng = np.random.default_rng(n)
     w = rng.gamma(0.5, 1.0, n)
     w[::5] = 0.0
@@ -153,14 +153,14 @@ def test_discrete_cdf_index_is_the_first_entry_above_u(cl_env, prog, n, start):
         assert not bad.size, f"{name}: u={u[bad[:5]]}: index {k[bad[:5]]}, want {want[bad[:5]]}"
 
 
-def test_envmap_guide_starts_at_the_answer_for_its_bin():
-    """guide[g] is the index the search returns at u = g / n, row by row of a 2-d table."""
-    from volcl.envmap import guide
+def test_guide_starts_at_the_answer_for_its_bin():
+    """guide[g] is the index the search returns at u = g / n (in float32), row by row of a 2-d table."""
+    from volcl.guides import guide
     rng = np.random.default_rng(2)
     cdf = np.stack([host_cdf(rng.gamma(0.3, 1.0, 64).tolist()) for _ in range(5)])
     g = guide(cdf)
     assert g.shape == cdf.shape and g.dtype == np.float32
-    at = np.arange(64) / 64
+    at = np.arange(64, dtype=np.float32) / np.float32(64)
     for row, gr in zip(cdf, g):
         assert np.array_equal(gr, np.minimum(np.searchsorted(row, at, side="right"), 63))
 

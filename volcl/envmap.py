@@ -14,6 +14,8 @@ import math
 
 import numpy as np
 
+from .guides import guide
+
 # Mitsuba's luminance of linear sRGB (src/render/srgb.h, the kernels' luminance())
 LUMINANCE = np.array([0.212671, 0.715160, 0.072169])
 # Mitsuba pads smaller images to this (width, height) by repeating the last column and row
@@ -92,18 +94,6 @@ def tables(texels: np.ndarray) -> tuple[np.ndarray, float]:
     data = np.concatenate([np.asarray(texels, np.float32).reshape(-1), f.reshape(-1), cond.reshape(-1), marg,
                            guide(cond).reshape(-1), guide(marg)])
     return data, norm
-
-
-def guide(cdf: np.ndarray) -> np.ndarray:
-    """Where the kernel's search of each float32 CDF (last axis, n entries) starts: entry g is the
-    first index whose CDF exceeds g / n (n - 1 if none does), as float32 (exact below 2^24). Any
-    start gives the same index (sample_discrete_cdf_guided walks to it); this one makes the walk a
-    step or two on average, where a binary search's random branches cost most of a sample."""
-    n = cdf.shape[-1]
-    at = np.arange(n, dtype=np.float64) / n
-    rows = np.asarray(cdf, np.float64).reshape(-1, n)
-    g = np.stack([np.searchsorted(r, at, side="right") for r in rows])
-    return np.minimum(g, n - 1).astype(np.float32).reshape(cdf.shape)
 
 
 def table_size(width: int, height: int) -> int:

@@ -33,6 +33,7 @@ from .bvh_wide import device_bvh, empty_wide
 from .errors import VolclError
 from .features import detect
 from .grids import GridPacker
+from .guides import guide
 from .mesh import triangle_areas32
 from .pack_materials import MaterialPacker, reads_uv, transmits
 from .phase import PhasePacker
@@ -161,10 +162,8 @@ def filter_table(f: Filter, size: int = FILTER_TABLE_SIZE) -> np.ndarray:
     mass = (filter_profile(f, mid[:, None] + half[:, None] * nodes[None]) * weights).sum(1) * half
     cdf = np.concatenate([[0.0], np.cumsum(mass)])
     cdf = (cdf / cdf[-1]).astype(np.float32)
-    n = size - 1
-    # computed on the float32 CDF the kernel compares against, so the guide never points past u
-    guide = np.searchsorted(cdf[1:], np.arange(n, dtype=np.float32) / np.float32(n), side="right")
-    return np.concatenate([cdf, np.minimum(guide, n - 1).astype(np.float32)])
+    # the search runs over the entries past cdf[0] = 0: the ends of the intervals
+    return np.concatenate([cdf, guide(cdf[1:])])
 
 
 def filter_cdf_size(table: np.ndarray) -> int:
