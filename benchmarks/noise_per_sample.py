@@ -53,7 +53,7 @@ def box_variant(scene: Path) -> Path | None:
 
 
 def block_means(img: np.ndarray, b: int) -> np.ndarray:
-    grey = img[..., :3].mean(axis=2)
+    grey = np.asarray(img[..., :3], np.float64).mean(axis=2)
     h, w = grey.shape
     return grey[:h // b * b, :w // b * b].reshape(h // b, b, w // b, b).mean(axis=(1, 3))
 
@@ -67,15 +67,6 @@ def per_sample_noise(a: np.ndarray, b: np.ndarray, spp: int, block: int) -> tupl
     rel = 0.5 * (A - B) ** 2 / np.where(keep, m, 1.0) ** 2 * spp
     r = rel[keep]
     return float(np.median(r)), float(r.mean()), float(np.percentile(r, 90))
-
-
-def load(path: Path) -> np.ndarray:
-    import OpenImageIO as oiio
-    inp = oiio.ImageInput.open(str(path))
-    try:
-        return np.asarray(inp.read_image(oiio.FLOAT), np.float64)
-    finally:
-        inp.close()
 
 
 def main(argv=None) -> int:
@@ -95,6 +86,7 @@ def main(argv=None) -> int:
         print("skipped: Mitsuba 3 not found: pass --mitsuba-python")
         return 0
     from volcl import device as devmod
+    from volcl.image import read_image
     dev = devmod.choose()
     w, h = args.size.lower().split("x")
     defines = {"width": w, "height": h}
@@ -125,7 +117,7 @@ def main(argv=None) -> int:
                         else:
                             mitsuba_ref.render_mitsuba(str(path), str(exr), python, args.variant, args.spp, seed,
                                                        defines, repeat=1, warmup=False)
-                        imgs.append(load(exr))
+                        imgs.append(read_image(exr)[0])
                     figures[who] = per_sample_noise(imgs[0], imgs[1], args.spp, args.block)
                 v, m = figures["volcl"], figures["mitsuba"]
                 ratio = " / ".join(f"{a / b:.2f}" for a, b in zip(v, m))
