@@ -1,5 +1,7 @@
 """Small pieces the benchmark scripts share. Standard library only: mitsuba_ref.py imports this
 from inside the Python that has Mitsuba, which need not have volcl."""
+from __future__ import annotations
+
 import platform
 import sys
 from pathlib import Path
@@ -11,13 +13,31 @@ def log(msg):
 
 
 def cpu_model() -> str:
+    """The CPU's model name with its widest vector extension: hosts of the same model name
+    differ there (an AMD EPYC with AVX2 only or with AVX-512), and Mitsuba's LLVM backend's
+    speed follows the vector width, so a figure means little without it."""
+    model, simd = platform.processor() or "unknown", None
     try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
+        lines = Path("/proc/cpuinfo").read_text().splitlines()
     except OSError:
-        pass
-    return platform.processor() or "unknown"
+        return model
+    for line in lines:
+        key, _, value = line.partition(":")
+        key = key.strip()
+        if key == "model name":
+            model = value.strip()
+        elif key in ("flags", "Features") and simd is None:
+            simd = widest_simd(set(value.split()))
+    return f"{model} ({simd})" if simd else model
+
+
+def widest_simd(flags: set) -> str | None:
+    """The widest vector extension named in a /proc/cpuinfo flags (x86) or Features (Arm) line."""
+    for flag, name in (("avx512f", "AVX-512"), ("avx2", "AVX2"), ("avx", "AVX"), ("sse4_2", "SSE4.2"),
+                       ("sve2", "SVE2"), ("sve", "SVE"), ("asimd", "NEON")):
+        if flag in flags:
+            return name
+    return None
 
 
 def parse_defines(items) -> dict:
