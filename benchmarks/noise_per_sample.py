@@ -35,6 +35,7 @@ sys.path.insert(0, str(HERE))
 
 import compare_mitsuba  # noqa: E402
 import mitsuba_ref  # noqa: E402
+from render_throughput import block_means  # noqa: E402
 
 DEFAULT_SCENES = ["scenes/cbox.xml", "scenes/textured_cbox.xml", "scenes/rough_glass_medium.xml"]
 RFILTER = re.compile(r"<rfilter\b[^>]*?(/>|>.*?</rfilter>)", re.S)
@@ -52,16 +53,10 @@ def box_variant(scene: Path) -> Path | None:
     return out
 
 
-def block_means(img: np.ndarray, b: int) -> np.ndarray:
-    grey = np.asarray(img[..., :3], np.float64).mean(axis=2)
-    h, w = grey.shape
-    return grey[:h // b * b, :w // b * b].reshape(h // b, b, w // b, b).mean(axis=(1, 3))
-
-
 def per_sample_noise(a: np.ndarray, b: np.ndarray, spp: int, block: int) -> tuple[float, float, float]:
     """(median, mean, 90th percentile) over blocks of the relative variance of a block mean at one
     sample per pixel, from two independent renders of spp samples."""
-    A, B = block_means(a, block), block_means(b, block)
+    A, B = (block_means(x, block).mean(axis=2) for x in (a, b))
     m = 0.5 * (A + B)
     keep = m > 1e-3
     rel = 0.5 * (A - B) ** 2 / np.where(keep, m, 1.0) ** 2 * spp

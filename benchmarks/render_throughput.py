@@ -134,6 +134,16 @@ def volcl_render_alone(r, spp, images=None):
     return res.seconds, cpu_seconds() - c0, res.invalid
 
 
+def block_means(img, block):
+    """The image's RGB in float64, averaged over block x block squares (rows and columns past the
+    last whole square dropped); block 1 leaves it as it is."""
+    x = np.asarray(img, np.float64)[..., :3]
+    if block <= 1:
+        return x
+    h, w = (x.shape[0] // block) * block, (x.shape[1] // block) * block
+    return x[:h, :w].reshape(h // block, block, w // block, block, 3).mean((1, 3))
+
+
 def relative_noise(a, b, block=1):
     """Relative mean squared error of one render from two renders with independent seeds: the
     mean over pixels and channels of (a - b)^2 / 2 (each image's variance about its expectation),
@@ -144,11 +154,7 @@ def relative_noise(a, b, block=1):
     shows less variance than one that samples the filter (volcl: each sample lands in one pixel)
     for the same information; over blocks a few filter radii wide the difference shrinks, but at
     4x4 blocks it is still 1.25-1.44x for Mitsuba's Gaussian (benchmarks/noise_per_sample.py)."""
-    a, b = np.asarray(a, np.float64)[..., :3], np.asarray(b, np.float64)[..., :3]
-    if block > 1:
-        h, w = (a.shape[0] // block) * block, (a.shape[1] // block) * block
-        shrink = lambda x: x[:h, :w].reshape(h // block, block, w // block, block, 3).mean((1, 3))  # noqa: E731
-        a, b = shrink(a), shrink(b)
+    a, b = block_means(a, block), block_means(b, block)
     mean = 0.5 * (a.mean() + b.mean())
     return float(((a - b) ** 2).mean() / 2 / max(mean, 1e-30) ** 2)
 
