@@ -53,10 +53,10 @@ inline float sincos_upper(float phi, float *c) {
     int k = (int)(phi * M_2_PI_F + 0.5f);
     float a = (phi - (float)k * half_pi_hi) - (float)k * half_pi_lo;
     float sa = sin_small(a), ca = cos_small(a);
-    if (k == 0) { *c = ca; return sa; }
-    if (k == 1) { *c = -sa; return ca; }
-    *c = -ca;
-    return -sa;
+    /* selects, not branches: a work-item vectorizer gives up at a switch or an early return
+     * (benchmarks/medium_step.py) */
+    *c = k == 0 ? ca : (k == 1 ? -sa : -ca);
+    return k == 0 ? sa : (k == 1 ? ca : -sa);
 }
 
 /* sin(2 pi u), and cos(2 pi u) in *c, for u in [0, 1): the quarter turn k nearest u is taken off
@@ -65,12 +65,12 @@ inline float sincos_turn(float u, float *c) {
     int k = (int)(4.0f * u + 0.5f);
     float a = (2.0f * VOLCL_PI) * (u - 0.25f * (float)k);
     float sa = sin_small(a), ca = cos_small(a);
-    switch (k & 3) {
-    case 0: *c = ca; return sa;
-    case 1: *c = -sa; return ca;
-    case 2: *c = -ca; return -sa;
-    default: *c = sa; return -ca;
-    }
+    /* quarter turn k: (sin, cos) = (sa, ca), (ca, -sa), (-sa, -ca), (-ca, sa), as selects (see
+     * sincos_upper) */
+    bool odd = (k & 1) != 0;
+    float s = odd ? ca : sa, co = odd ? sa : ca;
+    *c = ((k + 1) & 2) != 0 ? -co : co;
+    return (k & 2) != 0 ? -s : s;
 }
 
 /* log(x) for normal x > 0, as Cephes' logf: x = m 2^e with m in [sqrt(1/2), sqrt(2)), a polynomial

@@ -1,0 +1,263 @@
+/* Benchmark-only kernels: one step of a path through a grey homogeneous fog lit by a point light,
+ * the work path_medium_event (kernels/integrator.h) does on point_in_fog's segments, written as a
+ * wavefront stage: each launch reads every path's state from global arrays, steps it once and
+ * writes it back (benchmarks/medium_step.py). The step uses the renderer's own routines
+ * (equiangular.h, phase.h, trig.h, rng.h) and leaves out what other stages would do: the shadow
+ * rays' and the segment's BVH queries (their transmittance through the fog is the exponential
+ * they would multiply in) and surface events.
+ *
+ * The same body is compiled three ways: `step_hinted` carries VOLCL_KERNEL's vector type hint, as
+ * the renderer's kernels do; `step_auto` carries none, so a work-group vectorizer may run it
+ * several work-items to a vector register; `step_lanes` is a loop over MEDIUM_LANES paths in one
+ * work-item, the shape an explicit several-paths-per-work-item kernel would have. `step_scalar`
+ * (below) is the same step in scalar floats. State layout:
+ * row r of `state` holds field r of every path (structure of arrays), so lanes load contiguously. */
+/* MEDIUM_INLINE_ALL: every function inlined. A call left in the work-item loop (PoCL left
+ * equiangular_segment_pdf, called twice, out of line) stops LLVM's loop vectorizer ("instruction
+ * cannot be vectorized"); a stage kernel meant for the lanes is built this way. */
+#ifdef MEDIUM_INLINE_ALL
+#define inline inline __attribute__((always_inline))
+#endif
+#include "types.h"
+#include "common.h"
+#include "scene.h"
+#include "rng.h"
+#include "sampling.h"
+#include "trig.h"
+#include "phase.h"
+#include "equiangular.h"
+
+#define F_OX 0
+#define F_DX 3
+#define F_BETA 6
+#define F_L 7
+#define F_T 10
+#define STATE_ROWS 11
+
+typedef struct {
+    float sigma, albedo, g;
+    float3 light, intensity;
+} Fog;
+
+inline float3 row3(__global const float *s, int row, int i, int n) {
+    return (float3)(s[row * n + i], s[(row + 1) * n + i], s[(row + 2) * n + i]);
+}
+
+inline void put3(__global float *s, int row, int i, int n, float3 v) {
+    s[row * n + i] = v.x;
+    s[(row + 1) * n + i] = v.y;
+    s[(row + 2) * n + i] = v.z;
+}
+
+/* Radiance the point light sends to x through the fog, before the phase value and MIS weight. */
+__attribute__((always_inline))
+inline float3 fog_light_at(const Fog *f, float3 x, float3 *wi, float *d2) {
+    float3 v = f->light - x;
+    *d2 = dot(v, v);
+    float dist = sqrt(*d2);
+    *wi = v / dist;
+    return f->intensity * (exp(-f->sigma * dist) / *d2);
+}
+
+/* One segment o + t d, t < t_seg: the equiangular sample's direct light, then a free flight; at a
+ * collision, NEE from the collision (MIS against the equiangular sample) and an HG direction. Grey
+ * fog, so beta is one number. */
+__attribute__((always_inline))
+inline void fog_step(const Fog *f, float3 *o, float3 *d, float t_seg, float *beta, float3 *L, Rng *rng) {
+    float sigma_s = f->sigma * f->albedo;
+    EquiangularSegment s;
+    bool seg_ok = equiangular_segment(*o, *d, t_seg, f->light, &s);
+    float u_e = rng_next_float(rng);
+    float t_e, pdf_e;
+    if (seg_ok && equiangular_segment_sample(&s, u_e, &t_e, &pdf_e)) {
+        float3 wi;
+        float d2;
+        float3 le = fog_light_at(f, *o + t_e * *d, &wi, &d2);
+        float tr = exp(-f->sigma * t_e);
+        float w = power_heuristic(pdf_e, f->sigma * tr);
+        *L += *beta * tr * sigma_s * phase_hg_eval_dirs(f->g, *d, wi) * w / pdf_e * le;
+    }
+    float u = rng_next_float(rng);
+    float t = -log_pos(1.0f - u) / f->sigma;
+    float2 u_dir = rng_next_float2(rng);
+    if (!(t < t_seg)) return;       /* the segment's end: a surface stage's work */
+    *beta *= f->albedo;
+    float3 p = *o + t * *d;
+    float3 wi;
+    float d2;
+    float3 le = fog_light_at(f, p, &wi, &d2);
+    float pdf_eq = seg_ok ? equiangular_segment_pdf(&s, t) : 0.0f;
+    float w = power_heuristic(f->sigma * (1.0f - u), pdf_eq);
+    *L += *beta * phase_hg_eval_dirs(f->g, *d, wi) * w * le;
+    float3 peak = f->g >= 0.0f ? *d : -*d;
+    *d = phase_direction_at(peak, phase_hg_sample_w(fabs(f->g), u_dir.x), u_dir.y);
+    *o = p;
+}
+
+__attribute__((always_inline))
+inline void step_path(const Fog *f, __global float *state, __global ulong *rng_state, __global const ulong *rng_inc,
+                      int i, int n) {
+    float3 o = row3(state, F_OX, i, n), d = row3(state, F_DX, i, n), L = row3(state, F_L, i, n);
+    float beta = state[F_BETA * n + i];
+    Rng rng;
+    rng.state = rng_state[i];
+    rng.inc = rng_inc[i];
+    fog_step(f, &o, &d, state[F_T * n + i], &beta, &L, &rng);
+    put3(state, F_OX, i, n, o);
+    put3(state, F_DX, i, n, d);
+    put3(state, F_L, i, n, L);
+    state[F_BETA * n + i] = beta;
+    rng_state[i] = rng.state;
+}
+
+#define STEP_ARGS float sigma, float albedo, float g, float lx, float ly, float lz, float ix, float iy, float iz, \
+    __global float *state, __global ulong *rng_state, __global const ulong *rng_inc, int n
+
+inline Fog fog_make(float sigma, float albedo, float g, float lx, float ly, float lz, float ix, float iy, float iz) {
+    Fog f;
+    f.sigma = sigma;
+    f.albedo = albedo;
+    f.g = g;
+    f.light = (float3)(lx, ly, lz);
+    f.intensity = (float3)(ix, iy, iz);
+    return f;
+}
+
+VOLCL_KERNEL void step_hinted(STEP_ARGS) {
+    int i = get_global_id(0);
+    if (i >= n) return;
+    Fog f = fog_make(sigma, albedo, g, lx, ly, lz, ix, iy, iz);
+    step_path(&f, state, rng_state, rng_inc, i, n);
+}
+
+__kernel void step_auto(STEP_ARGS) {
+    int i = get_global_id(0);
+    if (i >= n) return;
+    Fog f = fog_make(sigma, albedo, g, lx, ly, lz, ix, iy, iz);
+    step_path(&f, state, rng_state, rng_inc, i, n);
+}
+
+/* ---- The same step in scalar floats. LLVM's loop vectorizer, which PoCL runs on its work-item
+ * loops, widens only scalar values: one float3 (<3 x float>) in the loop and it gives up
+ * ("instruction return type cannot be vectorized"), as it does at a switch. Here a vector is a struct
+ * of three floats, which LLVM splits into scalars; the routines that are scalar already (equiangular
+ * sampling and pdf on a set-up segment, atan2_upper, sincos_turn, log_pos, the HG sampler and value
+ * in w) are the renderer's own. */
+typedef struct { float x, y, z; } V3;
+
+inline V3 v3(float x, float y, float z) { V3 v = {x, y, z}; return v; }
+inline V3 v3_add(V3 a, V3 b) { return v3(a.x + b.x, a.y + b.y, a.z + b.z); }
+inline V3 v3_sub(V3 a, V3 b) { return v3(a.x - b.x, a.y - b.y, a.z - b.z); }
+inline V3 v3_mul(V3 a, float s) { return v3(a.x * s, a.y * s, a.z * s); }
+inline V3 v3_madd(V3 o, float t, V3 d) { return v3(o.x + t * d.x, o.y + t * d.y, o.z + t * d.z); }
+inline float v3_dot(V3 a, V3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+
+/* equiangular_segment's set-up (equiangular.h) on V3 */
+inline bool segment_v3(V3 o, V3 d, float t_max, V3 light, EquiangularSegment *s) {
+    V3 v = v3_sub(light, o);
+    s->delta = v3_dot(v, d);
+    V3 perp = v3_madd(v, -s->delta, d);
+    s->h = sqrt(v3_dot(perp, perp));
+    float reach = EQUIANGULAR_SPAN * s->h;
+    s->t0 = fmax(0.0f, s->delta - reach);
+    s->t1 = fmin(t_max, s->delta + reach);
+    s->u0 = s->t0 - s->delta;
+    float u1 = s->t1 - s->delta;
+    s->theta = atan2_upper(s->h * (u1 - s->u0), s->h * s->h + s->u0 * u1);
+    return s->h * s->h > 0.0f && s->t1 > s->t0 && s->theta > 0.0f;
+}
+
+/* phase_direction_at (phase.h) on V3: make_frame's basis about the peak, then normalized */
+inline V3 direction_v3(V3 n, float w, float u) {
+    float sn = sqrt(fmax(0.0f, w * (2.0f - w)));
+    float cp, sp = sincos_turn(u, &cp);
+    float sign = copysign(1.0f, n.z);
+    float a = -1.0f / (sign + n.z);
+    float b = n.x * n.y * a;
+    V3 s = v3(1.0f + sign * n.x * n.x * a, sign * b, -sign * n.x), t = v3(b, sign + n.y * n.y * a, -n.y);
+    float lx = sn * cp, ly = sn * sp, lz = 1.0f - w;
+    V3 r = v3(lx * s.x + ly * t.x + lz * n.x, lx * s.y + ly * t.y + lz * n.y, lx * s.z + ly * t.z + lz * n.z);
+    return v3_mul(r, rsqrt(v3_dot(r, r)));
+}
+
+inline float hg_v3(float g, V3 d_in, V3 d_out) {
+    V3 gap = g >= 0.0f ? v3_sub(d_in, d_out) : v3_add(d_in, d_out);
+    return phase_hg_eval_w(g, 0.5f * v3_dot(gap, gap));
+}
+
+inline float heuristic(float a, float b) {
+    float a2 = a * a, b2 = b * b;
+
+    return isinf(a2) ? (isinf(b2) ? 0.5f : 1.0f) : (a2 + b2 > 0.0f ? a2 / (a2 + b2) : 0.0f);
+}
+
+/* fog_light_at on V3 */
+inline V3 light_v3(const Fog *f, V3 x, V3 *wi) {
+    V3 v = v3_sub(v3(f->light.x, f->light.y, f->light.z), x);
+    float d2 = v3_dot(v, v), dist = sqrt(d2);
+    *wi = v3_mul(v, 1.0f / dist);
+    float k = exp(-f->sigma * dist) / d2;
+    return v3(f->intensity.x * k, f->intensity.y * k, f->intensity.z * k);
+}
+
+/* fog_step in scalar floats: the same estimator, written as selects where fog_step branches */
+inline void fog_step_v3(const Fog *f, V3 *o, V3 *d, float t_seg, float *beta, V3 *L, Rng *rng) {
+    float sigma_s = f->sigma * f->albedo;
+    EquiangularSegment s;
+    bool seg_ok = segment_v3(*o, *d, t_seg, v3(f->light.x, f->light.y, f->light.z), &s);
+    float u_e = rng_next_float(rng);
+    float t_e, pdf_e;
+    bool eq = seg_ok && equiangular_segment_sample(&s, u_e, &t_e, &pdf_e);
+    V3 wi;
+    V3 le = light_v3(f, v3_madd(*o, eq ? t_e : 0.0f, *d), &wi);
+    float tr = exp(-f->sigma * t_e);
+    float c = eq ? *beta * tr * sigma_s * hg_v3(f->g, *d, wi) * heuristic(pdf_e, f->sigma * tr) / pdf_e : 0.0f;
+    *L = v3_madd(*L, c, le);
+    float u = rng_next_float(rng);
+    float t = -log_pos(1.0f - u) / f->sigma;
+    float2 u_dir = rng_next_float2(rng);
+    bool scattered = t < t_seg;
+    float b = scattered ? *beta * f->albedo : *beta;
+    V3 p = v3_madd(*o, scattered ? t : 0.0f, *d);
+    le = light_v3(f, p, &wi);
+    float pdf_eq = seg_ok ? equiangular_segment_pdf(&s, t) : 0.0f;
+    c = scattered ? b * hg_v3(f->g, *d, wi) * heuristic(f->sigma * (1.0f - u), pdf_eq) : 0.0f;
+    *L = v3_madd(*L, c, le);
+    V3 peak = f->g >= 0.0f ? *d : v3_mul(*d, -1.0f);
+    V3 nd = direction_v3(peak, phase_hg_sample_w(fabs(f->g), u_dir.x), u_dir.y);
+    *d = scattered ? nd : *d;
+    *o = scattered ? p : *o;
+    *beta = b;
+}
+
+/* No bounds test: a store under a condition keeps LLVM from vectorizing the loop ("control flow
+ * cannot be substituted for a select"), so the host launches n work-items exactly, as a wavefront
+ * renderer would pad its path arrays to the work-group size. */
+__kernel void step_scalar(STEP_ARGS) {
+    int i = get_global_id(0);
+    Fog f = fog_make(sigma, albedo, g, lx, ly, lz, ix, iy, iz);
+    V3 o = v3(state[(F_OX) * n + i], state[(F_OX + 1) * n + i], state[(F_OX + 2) * n + i]);
+    V3 d = v3(state[(F_DX) * n + i], state[(F_DX + 1) * n + i], state[(F_DX + 2) * n + i]);
+    V3 L = v3(state[(F_L) * n + i], state[(F_L + 1) * n + i], state[(F_L + 2) * n + i]);
+    float beta = state[F_BETA * n + i];
+    Rng rng;
+    rng.state = rng_state[i];
+    rng.inc = rng_inc[i];
+    fog_step_v3(&f, &o, &d, state[F_T * n + i], &beta, &L, &rng);
+    state[F_OX * n + i] = o.x; state[(F_OX + 1) * n + i] = o.y; state[(F_OX + 2) * n + i] = o.z;
+    state[F_DX * n + i] = d.x; state[(F_DX + 1) * n + i] = d.y; state[(F_DX + 2) * n + i] = d.z;
+    state[F_L * n + i] = L.x; state[(F_L + 1) * n + i] = L.y; state[(F_L + 2) * n + i] = L.z;
+    state[F_BETA * n + i] = beta;
+    rng_state[i] = rng.state;
+}
+
+#ifndef MEDIUM_LANES
+#define MEDIUM_LANES 8
+#endif
+
+VOLCL_KERNEL void step_lanes(STEP_ARGS) {
+    int first = get_global_id(0) * MEDIUM_LANES;
+    Fog f = fog_make(sigma, albedo, g, lx, ly, lz, ix, iy, iz);
+    for (int k = 0; k < MEDIUM_LANES; ++k)
+        if (first + k < n) step_path(&f, state, rng_state, rng_inc, first + k, n);
+}
