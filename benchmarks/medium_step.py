@@ -15,7 +15,9 @@ wavefront renderer's would, so the loads and stores of that state are counted.
 Kernels: `hinted` (VOLCL_KERNEL's vector type hint, as the renderer builds), `auto` (no hint, for
 the runtime's vectorizer to take), `lanes` (--lanes paths looped in one work-item), `scalar` (the
 same step in scalar floats instead of float3, built with every function inlined and launched
-without a bounds test: what LLVM's loop vectorizer needs, see the kernel file). Configurations,
+without a bounds test: what LLVM's loop vectorizer needs, see the kernel file), `scalar32` (that
+step with the generator's 64-bit state as two 32-bit halves, in rows of low and high halves: the
+same random numbers, and no 64-bit value to narrow the vectors). Configurations,
 each in its own process (they are environment settings of the runtime):
   pocl        PoCL as volcl uses it (work-group method loopvec: LLVM's loop vectorizer on the
               work-item loop)
@@ -47,7 +49,7 @@ sys.path.insert(0, str(HERE))
 from common import cpu_model, log  # noqa: E402
 
 KERNEL = HERE / "kernels" / "medium_step.cl"
-KERNELS = ("hinted", "auto", "lanes", "scalar")
+KERNELS = ("hinted", "auto", "lanes", "scalar", "scalar32")
 CONFIGS = {
     "pocl": ("portable computing language", {}),
     "pocl-loops": ("portable computing language", {"POCL_WORK_GROUP_METHOD": "loops"}),
@@ -79,6 +81,13 @@ def initial_state(n, seed=1):
     return state, rng_state, rng_inc
 
 
+def rng_rows(state):
+    """64-bit generator states as the uint rows step_scalar32 reads: every low half, then every
+    high half."""
+    halves = state.view(np.uint32).reshape(-1, 2)       # little-endian: (low, high) per state
+    return np.ascontiguousarray(halves.T).ravel()
+
+
 def worker(platform, n, launches, rounds, lanes):
     import pyopencl as cl
     from volcl import device as devmod
@@ -100,19 +109,24 @@ def worker(platform, n, launches, rounds, lanes):
     mf = cl.mem_flags
     bufs = [cl.Buffer(ctx, mf.READ_WRITE, state0.nbytes), cl.Buffer(ctx, mf.READ_WRITE, rs0.nbytes),
             cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=inc)]
+    inc_rows = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=rng_rows(inc))
     fog = [np.float32(v) for v in FOG]
     out = {"device": f"{dev.name} ({dev.platform_name})", "kernels": {}}
     for name in KERNELS:
-        kernel = cl.Kernel(programs["inlined" if name == "scalar" else "renderer"], f"step_{name}")
+        kernel = cl.Kernel(programs["inlined" if name.startswith("scalar") else "renderer"], f"step_{name}")
         items = -(-n // lanes) if name == "lanes" else n
+
+        # scalar32 reads the generator's state as rows of low and high 32-bit halves
+        rs_init = rng_rows(rs0) if name == "scalar32" else rs0
+        args = [bufs[0], bufs[1], inc_rows if name == "scalar32" else bufs[2]]
 
         def launch_all():
             cl.enqueue_copy(queue, bufs[0], state0)
-            cl.enqueue_copy(queue, bufs[1], rs0)
+            cl.enqueue_copy(queue, bufs[1], rs_init)
             queue.finish()
             c0, t0 = cpu_seconds(), time.perf_counter()
             for _ in range(launches):
-                kernel(queue, (items,), None, *fog, *bufs, np.int32(n))
+                kernel(queue, (items,), None, *fog, *args, np.int32(n))
             queue.finish()
             return time.perf_counter() - t0, cpu_seconds() - c0
 

@@ -10,7 +10,8 @@
  * the renderer's kernels do; `step_auto` carries none, so a work-group vectorizer may run it
  * several work-items to a vector register; `step_lanes` is a loop over MEDIUM_LANES paths in one
  * work-item, the shape an explicit several-paths-per-work-item kernel would have. `step_scalar`
- * (below) is the same step in scalar floats. State layout:
+ * (below) is the same step in scalar floats, and `step_scalar32` that step with the generator's
+ * 64-bit state held as two 32-bit halves. State layout:
  * row r of `state` holds field r of every path (structure of arrays), so lanes load contiguously. */
 /* MEDIUM_INLINE_ALL: every function inlined. A call left in the work-item loop (PoCL left
  * equiangular_segment_pdf, called twice, out of line) stops LLVM's loop vectorizer ("instruction
@@ -138,12 +139,25 @@ __kernel void step_auto(STEP_ARGS) {
 }
 
 /* ---- The same step in scalar floats. LLVM's loop vectorizer, which PoCL runs on its work-item
- * loops, widens only scalar values: one float3 (<3 x float>) in the loop and it gives up
- * ("instruction return type cannot be vectorized"), as it does at a switch. Here a vector is a struct
- * of three floats, which LLVM splits into scalars; the routines that are scalar already (equiangular
- * sampling and pdf on a set-up segment, atan2_upper, sincos_turn, log_pos, the HG sampler and value
- * in w) are the renderer's own. */
+ * loops, widens only scalar values: one vector-typed instruction in the loop and it gives up
+ * ("instruction return type cannot be vectorized"), as it does at a switch. So a vector here is a
+ * struct of three floats, which LLVM splits into scalars, with two rules that keep it split:
+ * - Choose between two V3s one component at a time (v3_sel), never `c ? a : b` on whole structs.
+ *   The x86-64 calling convention passes and returns a 12-byte struct as {<2 x float>, float};
+ *   after inlining, a select or phi of two whole structs stays a select of <2 x float> values,
+ *   and that vector stops the loop vectorizer as a float3 does.
+ * - No 64-bit values (step_scalar32): the vectorizer sizes its vectors by the widest type in the
+ *   loop, so the PCG state's multiply holds a 256-bit register to 4 lanes where 32-bit values
+ *   alone fill 8.
+ * The routines that are scalar already (equiangular sampling and pdf on a set-up segment,
+ * atan2_upper, sincos_turn, log_pos, the HG sampler and value in w) are the renderer's own. */
 typedef struct { float x, y, z; } V3;
+
+/* Fog with V3 fields: a float3 even in a loop-invariant struct stops the vectorizer */
+typedef struct {
+    float sigma, albedo, g;
+    V3 light, intensity;
+} FogS;
 
 inline V3 v3(float x, float y, float z) { V3 v = {x, y, z}; return v; }
 inline V3 v3_add(V3 a, V3 b) { return v3(a.x + b.x, a.y + b.y, a.z + b.z); }
@@ -151,6 +165,7 @@ inline V3 v3_sub(V3 a, V3 b) { return v3(a.x - b.x, a.y - b.y, a.z - b.z); }
 inline V3 v3_mul(V3 a, float s) { return v3(a.x * s, a.y * s, a.z * s); }
 inline V3 v3_madd(V3 o, float t, V3 d) { return v3(o.x + t * d.x, o.y + t * d.y, o.z + t * d.z); }
 inline float v3_dot(V3 a, V3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+inline V3 v3_sel(bool c, V3 a, V3 b) { return v3(c ? a.x : b.x, c ? a.y : b.y, c ? a.z : b.z); }
 
 /* equiangular_segment's set-up (equiangular.h) on V3 */
 inline bool segment_v3(V3 o, V3 d, float t_max, V3 light, EquiangularSegment *s) {
@@ -181,7 +196,7 @@ inline V3 direction_v3(V3 n, float w, float u) {
 }
 
 inline float hg_v3(float g, V3 d_in, V3 d_out) {
-    V3 gap = g >= 0.0f ? v3_sub(d_in, d_out) : v3_add(d_in, d_out);
+    V3 gap = v3_sub(d_in, v3_mul(d_out, g >= 0.0f ? 1.0f : -1.0f));
     return phase_hg_eval_w(g, 0.5f * v3_dot(gap, gap));
 }
 
@@ -192,20 +207,53 @@ inline float heuristic(float a, float b) {
 }
 
 /* fog_light_at on V3 */
-inline V3 light_v3(const Fog *f, V3 x, V3 *wi) {
-    V3 v = v3_sub(v3(f->light.x, f->light.y, f->light.z), x);
+inline V3 light_v3(const FogS *f, V3 x, V3 *wi) {
+    V3 v = v3_sub(f->light, x);
     float d2 = v3_dot(v, v), dist = sqrt(d2);
     *wi = v3_mul(v, 1.0f / dist);
     float k = exp(-f->sigma * dist) / d2;
     return v3(f->intensity.x * k, f->intensity.y * k, f->intensity.z * k);
 }
 
+/* The step's random numbers: the renderer's PCG32 (rng.h), or the same generator with its 64-bit
+ * state held as two 32-bit halves. LLVM's loop vectorizer sizes its vectors by the widest type in
+ * the loop: one 64-bit integer (the state, its multiply) holds a 256-bit register to 4 lanes, where
+ * 32-bit values alone fill 8. The halves give the same numbers, bit for bit. */
+typedef struct { uint lo, hi, inc_lo, inc_hi; } Rng32;
+
+/* the high 32 bits of a 32 x 32-bit product from 16-bit pieces: PoCL's mul_hi widens to 64 bits */
+inline uint mul_hi32(uint a, uint b) {
+    uint a0 = a & 0xFFFFu, a1 = a >> 16, b0 = b & 0xFFFFu, b1 = b >> 16;
+    uint p01 = a0 * b1, p10 = a1 * b0;
+    uint mid = ((a0 * b0) >> 16) + (p01 & 0xFFFFu) + (p10 & 0xFFFFu);
+    return a1 * b1 + (p01 >> 16) + (p10 >> 16) + (mid >> 16);
+}
+
+inline uint rng32_next_uint(Rng32 *r) {
+    uint l = r->lo, h = r->hi;
+    const uint m_lo = 0x4C957F2Du, m_hi = 0x5851F42Du;    /* 6364136223846793005 */
+    uint p_lo = l * m_lo;
+    uint p_hi = mul_hi32(l, m_lo) + l * m_hi + h * m_lo;
+    r->lo = p_lo + r->inc_lo;
+    r->hi = p_hi + r->inc_hi + (r->lo < p_lo ? 1u : 0u);
+    /* ((old >> 18) ^ old) >> 27, its low 32 bits; rot = old >> 59 */
+    uint x_lo = l ^ ((l >> 18) | (h << 14)), x_hi = h ^ (h >> 18);
+    uint xorshifted = (x_lo >> 27) | (x_hi << 5);
+    uint rot = h >> 27;
+    return (xorshifted >> rot) | (xorshifted << ((-rot) & 31u));
+}
+
+inline float rng32_next_float(Rng32 *r) { return (float)(rng32_next_uint(r) >> 8) * (1.0f / 16777216.0f); }
+
+#define STEP_V3_NAME fog_step_v3
+#define STEP_RNG Rng
+#define STEP_RNG_FLOAT rng_next_float
 /* fog_step in scalar floats: the same estimator, written as selects where fog_step branches */
-inline void fog_step_v3(const Fog *f, V3 *o, V3 *d, float t_seg, float *beta, V3 *L, Rng *rng) {
+inline void STEP_V3_NAME(const FogS *f, V3 *o, V3 *d, float t_seg, float *beta, V3 *L, STEP_RNG *rng) {
     float sigma_s = f->sigma * f->albedo;
     EquiangularSegment s;
-    bool seg_ok = segment_v3(*o, *d, t_seg, v3(f->light.x, f->light.y, f->light.z), &s);
-    float u_e = rng_next_float(rng);
+    bool seg_ok = segment_v3(*o, *d, t_seg, f->light, &s);
+    float u_e = STEP_RNG_FLOAT(rng);
     float t_e, pdf_e;
     bool eq = seg_ok && equiangular_segment_sample(&s, u_e, &t_e, &pdf_e);
     V3 wi;
@@ -213,9 +261,9 @@ inline void fog_step_v3(const Fog *f, V3 *o, V3 *d, float t_seg, float *beta, V3
     float tr = exp(-f->sigma * t_e);
     float c = eq ? *beta * tr * sigma_s * hg_v3(f->g, *d, wi) * heuristic(pdf_e, f->sigma * tr) / pdf_e : 0.0f;
     *L = v3_madd(*L, c, le);
-    float u = rng_next_float(rng);
+    float u = STEP_RNG_FLOAT(rng);
     float t = -log_pos(1.0f - u) / f->sigma;
-    float2 u_dir = rng_next_float2(rng);
+    float u_w = STEP_RNG_FLOAT(rng), u_phi = STEP_RNG_FLOAT(rng);    /* rng_next_float2's, not a float2 */
     bool scattered = t < t_seg;
     float b = scattered ? *beta * f->albedo : *beta;
     V3 p = v3_madd(*o, scattered ? t : 0.0f, *d);
@@ -223,10 +271,46 @@ inline void fog_step_v3(const Fog *f, V3 *o, V3 *d, float t_seg, float *beta, V3
     float pdf_eq = seg_ok ? equiangular_segment_pdf(&s, t) : 0.0f;
     c = scattered ? b * hg_v3(f->g, *d, wi) * heuristic(f->sigma * (1.0f - u), pdf_eq) : 0.0f;
     *L = v3_madd(*L, c, le);
-    V3 peak = f->g >= 0.0f ? *d : v3_mul(*d, -1.0f);
-    V3 nd = direction_v3(peak, phase_hg_sample_w(fabs(f->g), u_dir.x), u_dir.y);
-    *d = scattered ? nd : *d;
-    *o = scattered ? p : *o;
+    V3 peak = v3_mul(*d, f->g >= 0.0f ? 1.0f : -1.0f);
+    V3 nd = direction_v3(peak, phase_hg_sample_w(fabs(f->g), u_w), u_phi);
+    *d = v3_sel(scattered, nd, *d);
+    *o = v3_sel(scattered, p, *o);
+    *beta = b;
+}
+
+#undef STEP_V3_NAME
+#undef STEP_RNG
+#undef STEP_RNG_FLOAT
+#define STEP_V3_NAME fog_step_v3_rng32
+#define STEP_RNG Rng32
+#define STEP_RNG_FLOAT rng32_next_float
+/* fog_step in scalar floats: the same estimator, written as selects where fog_step branches */
+inline void STEP_V3_NAME(const FogS *f, V3 *o, V3 *d, float t_seg, float *beta, V3 *L, STEP_RNG *rng) {
+    float sigma_s = f->sigma * f->albedo;
+    EquiangularSegment s;
+    bool seg_ok = segment_v3(*o, *d, t_seg, f->light, &s);
+    float u_e = STEP_RNG_FLOAT(rng);
+    float t_e, pdf_e;
+    bool eq = seg_ok && equiangular_segment_sample(&s, u_e, &t_e, &pdf_e);
+    V3 wi;
+    V3 le = light_v3(f, v3_madd(*o, eq ? t_e : 0.0f, *d), &wi);
+    float tr = exp(-f->sigma * t_e);
+    float c = eq ? *beta * tr * sigma_s * hg_v3(f->g, *d, wi) * heuristic(pdf_e, f->sigma * tr) / pdf_e : 0.0f;
+    *L = v3_madd(*L, c, le);
+    float u = STEP_RNG_FLOAT(rng);
+    float t = -log_pos(1.0f - u) / f->sigma;
+    float u_w = STEP_RNG_FLOAT(rng), u_phi = STEP_RNG_FLOAT(rng);    /* rng_next_float2's, not a float2 */
+    bool scattered = t < t_seg;
+    float b = scattered ? *beta * f->albedo : *beta;
+    V3 p = v3_madd(*o, scattered ? t : 0.0f, *d);
+    le = light_v3(f, p, &wi);
+    float pdf_eq = seg_ok ? equiangular_segment_pdf(&s, t) : 0.0f;
+    c = scattered ? b * hg_v3(f->g, *d, wi) * heuristic(f->sigma * (1.0f - u), pdf_eq) : 0.0f;
+    *L = v3_madd(*L, c, le);
+    V3 peak = v3_mul(*d, f->g >= 0.0f ? 1.0f : -1.0f);
+    V3 nd = direction_v3(peak, phase_hg_sample_w(fabs(f->g), u_w), u_phi);
+    *d = v3_sel(scattered, nd, *d);
+    *o = v3_sel(scattered, p, *o);
     *beta = b;
 }
 
@@ -235,7 +319,7 @@ inline void fog_step_v3(const Fog *f, V3 *o, V3 *d, float t_seg, float *beta, V3
  * renderer would pad its path arrays to the work-group size. */
 __kernel void step_scalar(STEP_ARGS) {
     int i = get_global_id(0);
-    Fog f = fog_make(sigma, albedo, g, lx, ly, lz, ix, iy, iz);
+    FogS f = {sigma, albedo, g, {lx, ly, lz}, {ix, iy, iz}};
     V3 o = v3(state[(F_OX) * n + i], state[(F_OX + 1) * n + i], state[(F_OX + 2) * n + i]);
     V3 d = v3(state[(F_DX) * n + i], state[(F_DX + 1) * n + i], state[(F_DX + 2) * n + i]);
     V3 L = v3(state[(F_L) * n + i], state[(F_L + 1) * n + i], state[(F_L + 2) * n + i]);
@@ -249,6 +333,29 @@ __kernel void step_scalar(STEP_ARGS) {
     state[F_L * n + i] = L.x; state[(F_L + 1) * n + i] = L.y; state[(F_L + 2) * n + i] = L.z;
     state[F_BETA * n + i] = beta;
     rng_state[i] = rng.state;
+}
+
+/* step_scalar with the 32-bit halves of the generator's state */
+__kernel void step_scalar32(STEP_ARGS) {
+    int i = get_global_id(0);
+    FogS f = {sigma, albedo, g, {lx, ly, lz}, {ix, iy, iz}};
+    V3 o = v3(state[(F_OX) * n + i], state[(F_OX + 1) * n + i], state[(F_OX + 2) * n + i]);
+    V3 d = v3(state[(F_DX) * n + i], state[(F_DX + 1) * n + i], state[(F_DX + 2) * n + i]);
+    V3 L = v3(state[(F_L) * n + i], state[(F_L + 1) * n + i], state[(F_L + 2) * n + i]);
+    float beta = state[F_BETA * n + i];
+    /* the generator's state as rows of 32-bit halves (low halves of every path, then high halves),
+     * so no 64-bit value is in the loop and no pair of adjacent halves for the SLP vectorizer to
+     * pack into a <2 x i32>, which stops the loop vectorizer as a float3 does */
+    __global uint *rs = (__global uint *)rng_state;
+    __global const uint *ri = (__global const uint *)rng_inc;
+    Rng32 rng = {rs[i], rs[n + i], ri[i], ri[n + i]};
+    fog_step_v3_rng32(&f, &o, &d, state[F_T * n + i], &beta, &L, &rng);
+    state[F_OX * n + i] = o.x; state[(F_OX + 1) * n + i] = o.y; state[(F_OX + 2) * n + i] = o.z;
+    state[F_DX * n + i] = d.x; state[(F_DX + 1) * n + i] = d.y; state[(F_DX + 2) * n + i] = d.z;
+    state[F_L * n + i] = L.x; state[(F_L + 1) * n + i] = L.y; state[(F_L + 2) * n + i] = L.z;
+    state[F_BETA * n + i] = beta;
+    rs[i] = rng.lo;
+    rs[n + i] = rng.hi;
 }
 
 #ifndef MEDIUM_LANES
