@@ -72,6 +72,18 @@ inline bool equiangular_segment_sample(const EquiangularSegment *s, float u, flo
     return *pdf > 0.0f;
 }
 
+/* Which techniques estimate point-light direct light on a segment (integrator.h has the estimator) */
+#define EQ_NONE 0           /* distance sampling alone */
+#define EQ_BOTH 1
+#define EQ_ONLY_EQUIANGULAR 2
+#define EQ_ONLY_DISTANCE 3
+
+/* MIS weight of the equiangular sample (pdf_e) against distance sampling (pdf_d) at its distance */
+inline float equiangular_weight(int tech, int mis, float pdf_e, float pdf_d) {
+    if (tech == EQ_ONLY_EQUIANGULAR) return 2.0f * power_heuristic(pdf_e, pdf_d);
+    return mis ? power_heuristic(pdf_e, pdf_d) : 1.0f;
+}
+
 inline bool sample_equiangular(float3 o, float3 d, float t_max, float3 light, float u, float *t, float *pdf) {
     EquiangularSegment s;
     if (!equiangular_segment(o, d, t_max, light, &s)) return false;

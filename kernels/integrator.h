@@ -240,12 +240,6 @@ inline float3 nee_contribution(const SceneData *sc, const LightSample *ls, float
  * ray. Media other than homogeneous keep distance sampling alone (their p_d is not available).
  */
 
-/* which techniques estimate point-light direct light on a segment */
-#define EQ_NONE 0           /* distance sampling alone */
-#define EQ_BOTH 1
-#define EQ_ONLY_EQUIANGULAR 2
-#define EQ_ONLY_DISTANCE 3
-
 typedef struct {
     int tech;
     float3 o, d, beta;  /* the segment and the throughput entering it */
@@ -276,11 +270,6 @@ inline float medium_distance_pdf_tr(__global const Medium *m, float3 beta, float
 /* The same from t; medium_distance_pdf_tr takes the transmittance to t where the caller has it. */
 inline float medium_distance_pdf(__global const Medium *m, float3 beta, float t) {
     return medium_distance_pdf_tr(m, beta, transmittance_exp(vload_f3(m->sigma_t), t));
-}
-
-inline float equiangular_weight(int tech, int mis, float pdf_e, float pdf_d) {
-    if (tech == EQ_ONLY_EQUIANGULAR) return 2.0f * power_heuristic(pdf_e, pdf_d);
-    return mis ? power_heuristic(pdf_e, pdf_d) : 1.0f;
 }
 
 /* weight of NEE towards a point light from the distance-sampled vertex at t */
@@ -620,10 +609,8 @@ inline bool path_roulette(const SceneData *sc, Rng *rng, PathState *ps) {
     return true;
 }
 
-/* Radiance arriving at o from direction -d. *cutoffs counts segments whose tracking hit its bound.
- * Each step traces the ray, lets the medium act on its segment (path_medium_event) and, where the
- * ray gets through, the surface it reaches (path_surface_event). */
-inline float3 integrator_radiance(const SceneData *sc, Rng *rng, float3 o, float3 d, float t_max, uint *cutoffs) {
+/* The state of a path that starts with the camera ray o + t d, t < t_max. */
+inline PathState path_start(const SceneData *sc, float3 o, float3 d, float t_max) {
     __global const RenderParams *rp = sc->params;
     PathState ps;
     ps.L = (float3)(0.0f);
@@ -639,7 +626,14 @@ inline float3 integrator_radiance(const SceneData *sc, Rng *rng, float3 o, float
     ps.eta_scale = 1.0f;
     ps.do_nee = rp->light_count > 0 && rp->nee;
     ps.t_back = 0.0f;
+    return ps;
+}
 
+/* Radiance arriving at o from direction -d. *cutoffs counts segments whose tracking hit its bound.
+ * Each step traces the ray, lets the medium act on its segment (path_medium_event) and, where the
+ * ray gets through, the surface it reaches (path_surface_event). */
+inline float3 integrator_radiance(const SceneData *sc, Rng *rng, float3 o, float3 d, float t_max, uint *cutoffs) {
+    PathState ps = path_start(sc, o, d, t_max);
     for (int step = 0; step < VOLCL_MAX_STEPS; ++step) {
         Hit h;
         bool hit = bvh_trace(sc, ps.o, ps.d, ps.t_max, TRACE_CLOSEST, &h);

@@ -12,53 +12,24 @@
  * infinite or negative are counted and left out of the sums instead of poisoning them, and medium
  * segments whose tracking hit its step bound are counted in `cutoffs` (see media.h).
  */
-#include "types.h"
-#include "common.h"
-#include "rng.h"
-#include "sampling.h"
-#include "scene.h"
-#include "bvh.h"
-#include "surface.h"
-#include "bsdf.h"
-#include "phase.h"
-#include "grid.h"
-#include "media.h"
-#include "lights.h"
-#include "equiangular.h"
-#include "camera.h"
-#include "integrator.h"
-#include "direct.h"
+#include "renderer.h"
 
 /* One sample of pixel (px, py) (index `pixel` in the image), added to accumulator entry `out`. */
 inline void render_sample(const SceneData *sc, __global const float *filter_table, int px, int py, int pixel,
                           uint sample, int out, __global float4 *sums, __global float4 *sums_sq,
                           __global uint *invalid, __global uint *cutoffs) {
-    __global const RenderParams *params = sc->params;
-    Rng rng = rng_init(params->seed, (uint)pixel, sample);
+    Rng rng;
     float3 o, d;
     float t_max;
-    float2 u_pixel = rng_next_float2(&rng);
-    /* drawn only where a lens needs it, so other cameras keep their random sequences */
-#if VOLCL_HAS_THINLENS
-    float2 u_lens = rng_next_float2(&rng);
-#else
-    float2 u_lens = (float2)(0.0f);
-#endif
-    camera_ray(sc, filter_table, px, py, u_pixel, u_lens, &o, &d, &t_max);
+    sample_camera_ray(sc, filter_table, px, py, pixel, sample, &rng, &o, &d, &t_max);
     uint cut = 0u;
     float3 L;
 #if VOLCL_HAS_DIRECT
-    if (params->integrator == INTEGRATOR_DIRECT) L = direct_radiance(sc, &rng, o, d, t_max);
+    if (sc->params->integrator == INTEGRATOR_DIRECT) L = direct_radiance(sc, &rng, o, d, t_max);
     else
 #endif
     L = integrator_radiance(sc, &rng, o, d, t_max, &cut);
-    if (cut) cutoffs[out] += cut;
-    if (isfinite(L.x) && isfinite(L.y) && isfinite(L.z) && L.x >= 0.0f && L.y >= 0.0f && L.z >= 0.0f) {
-        sums[out] += (float4)(L, 1.0f);
-        sums_sq[out] += (float4)(L * L, 0.0f);
-    } else {
-        invalid[out] += 1u;
-    }
+    sample_add(L, cut, out, sums, sums_sq, invalid, cutoffs);
 }
 
 VOLCL_KERNEL void render_pass(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
