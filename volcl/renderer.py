@@ -25,6 +25,7 @@ import numpy as np
 
 from . import __version__
 from . import device as devmod
+from . import wavefront
 from .errors import VolclError
 from .estimator import Estimator
 from .features import describe
@@ -68,6 +69,8 @@ class Renderer:
     accumulating sample passes.
 
     `slots` and `launch_pixels` (pixels per launch) override the defaults, for tests.
+    `engine` "wavefront" renders with volcl.wavefront's stage kernels instead of the megakernel
+    (homogeneous media and point lights on CPUs; the same samples, not yet faster).
     `launch_seconds` is the time budget of one launch: by default GPU_LAUNCH_SECONDS on GPUs and
     none elsewhere (a CPU device runs fixed launches of up to MAX_ITEMS work items, with no timing
     in between). `majorant_cells` applies when a model Scene is packed here.
@@ -78,7 +81,7 @@ class Renderer:
     def __init__(self, scene, device=None, features: dict | None = None, seed: int | None = None,
                  slots: int | None = None, launch_pixels: int | None = None, launch_seconds=_DEFAULT,
                  majorant_cells: int | None = None, majorant_scale: float = 1.0,
-                 estimator: Estimator | None = None, tile=None):
+                 estimator: Estimator | None = None, tile=None, engine: str = "megakernel"):
         if isinstance(scene, ModelScene):
             scene = PreparedScene(scene, majorant_cells=majorant_cells)
         elif majorant_cells is not None:
@@ -104,6 +107,7 @@ class Renderer:
         self.queue = self.device.queue
         self.kernel = cl.Kernel(self.program, "render_pass")
         self.group_items = _group_items(self.kernel, self.device.device)
+        self.wavefront = self._wavefront(engine)
         mf = cl.mem_flags
         self.params_buffer = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=self.params.reshape(1))
         if launch_seconds is _DEFAULT:
@@ -138,6 +142,21 @@ class Renderer:
         else:
             self.build_seconds, self.cold_build_seconds, self.build_was_cold = 0.0, None, False
 
+    def _wavefront(self, engine: str):
+        """The wavefront renderer (volcl.wavefront) where `engine` asks for it, else None."""
+        if engine not in wavefront.ENGINES:
+            raise VolclError(f"engine {engine!r}: expected one of {', '.join(wavefront.ENGINES)}")
+        if engine == "megakernel":
+            return None
+        why_not = wavefront.supported(self.features, self.packed, self.params, self.device)
+        if why_not is not None:
+            raise VolclError(f"the wavefront renderer cannot render this scene: {why_not}")
+        return wavefront.Wavefront(self.device, self.features, self.packed, self.group_items)
+
+    @property
+    def engine(self) -> str:
+        return "megakernel" if self.wavefront is None else "wavefront"
+
     @property
     def packed(self):
         return self.prepared.packed
@@ -164,9 +183,14 @@ class Renderer:
         first = 0
         while first < self.npix:
             count = min(self.launch_pixels, self.npix - first)
-            self.kernel.set_args(*args, *accum, np.uint32(sample_base), np.int32(t.x), np.int32(t.y),
-                                 np.int32(t.width), np.int32(self.npix), np.int32(first), np.int32(count),
-                                 np.int32(slots), np.int32(passes))
+            launch = (np.uint32(sample_base), np.int32(t.x), np.int32(t.y), np.int32(t.width), np.int32(self.npix),
+                      np.int32(first), np.int32(count), np.int32(slots), np.int32(passes))
+            if self.wavefront is not None:
+                self.wavefront.run(args, accum, launch, count * slots)
+                self.launches += 1
+                first += count
+                continue
+            self.kernel.set_args(*args, *accum, *launch)
             t0 = time.perf_counter()
             items = -(-count * slots // self.group_items) * self.group_items
             event = cl.enqueue_nd_range_kernel(self.queue, self.kernel, (items,), (self.group_items,))

@@ -1,0 +1,77 @@
+/* The wavefront renderer's path state (kernels/wavefront.cl, wavefront_lanes.cl, volcl/wavefront.py):
+ * structure of arrays, row r of a buffer holding field r of every path in flight, so that the
+ * lanes of a stage load and store neighbouring words. Shared by the scalar and the lanes stage,
+ * which are built as two programs.
+ *
+ * Rows are WF_STRIDE words apart, a constant, so that a field's address is the path's plus a
+ * constant: with the row length a kernel argument, the SLP vectorizer (which PoCL runs on the
+ * kernel before it forms its work-item loops) packed the rows' index arithmetic into a <4 x i32>,
+ * and that vector stopped the loop vectorizer (kernels/lanes.h). A wave holds at most WF_STRIDE
+ * paths. */
+#ifndef VOLCL_WAVEFRONT_STATE_H
+#define VOLCL_WAVEFRONT_STATE_H
+
+#define WF_STRIDE 65536
+#define WF_AT(r) ((r) * WF_STRIDE + i)
+
+/* The lights' and media's parameters the lanes stage reads, as rows of WF_TABLE_STRIDE words (light
+ * or medium k at word k of each row): fields of one record read as neighbouring words were packed
+ * into <2 x float> loads by the SLP vectorizer. volcl/wavefront.py fills it. */
+#define WF_TABLE_STRIDE 64
+#define WF_T_LIGHT_POS 0        /* 3 rows */
+#define WF_T_LIGHT_VALUE 3      /* 3 rows: a point light's intensity */
+#define WF_T_SIGMA_T 6          /* 3 rows */
+#define WF_T_ALBEDO 9           /* 3 rows */
+#define WF_T_G 12               /* HG's g, or 0 for the isotropic phase function */
+#define WF_T_ISO 13             /* 1 for the isotropic phase function, else 0 */
+#define WF_T_LANES 14           /* 1 where the lanes stage handles the medium (homogeneous), else 0 */
+#define WF_TABLE_ROWS 15
+
+/* float rows */
+#define WF_L 0              /* 3 rows each: x, y, z */
+#define WF_BETA 3
+#define WF_O 6
+#define WF_D 9
+#define WF_T_MAX 12
+#define WF_T_BACK 13
+#define WF_PREV_PDF 14
+#define WF_PREV_P 15
+#define WF_ETA_SCALE 18
+#define WF_HIT_T 19
+#define WF_HIT_B1 20
+#define WF_HIT_B2 21
+/* the two shadow rays a medium event leaves (the equiangular sample's and the collision's NEE): origin,
+ * direction, length, and the radiance they add if unblocked, to be multiplied by their transmittance */
+#define WF_SHADOW(k) (22 + 10 * (k))
+#define WF_SHADOW_O 0
+#define WF_SHADOW_D 3
+#define WF_SHADOW_T 6
+#define WF_SHADOW_C 7
+#define WF_FLOAT_ROWS 42
+
+/* int rows */
+#define WF_MEDIUM 0
+#define WF_DEPTH 1
+#define WF_FLAGS 2
+#define WF_HIT_PRIM 3
+#define WF_HIT_INST 4
+#define WF_EVENT 5
+#define WF_JOB 6            /* the sample the path renders: pass * items + work-item (wavefront.cl) */
+#define WF_STEPS 7          /* loop steps of the sample so far (VOLCL_MAX_STEPS) */
+#define WF_CUTOFFS 8        /* tracking cut-offs of the sample so far */
+#define WF_RNG 9            /* 4 rows: the generator's state and increment as 32-bit halves, low first */
+#define WF_INT_ROWS 13
+
+/* WF_FLAGS bits */
+#define WF_FLAG_ALIVE 1u    /* the path's work-item has samples left */
+#define WF_FLAG_SPECULAR 2u
+#define WF_FLAG_DO_NEE 4u
+#define WF_FLAG_HIT 8u      /* the ray traced last hit a surface (WF_HIT_*) */
+#define WF_FLAG_SHADOW0 16u /* shadow ray 0 is to be traced */
+#define WF_FLAG_SHADOW1 32u
+
+/* WF_EVENT: what the next stage does with the path, beyond integrator.h's PATH_* codes */
+#define WF_EV_MEDIUM 16     /* the ray is traced: its medium segment is next */
+#define WF_EV_START 17      /* a new sample starts */
+
+#endif

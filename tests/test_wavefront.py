@@ -1,0 +1,99 @@
+"""The wavefront renderer (volcl/wavefront.py, kernels/wavefront*.cl) renders the megakernel's
+samples: with one seed the same paths (up to the roundings of the lanes stage's vector arithmetic),
+with two seeds the same image within the renders' standard errors, for every estimator choice the
+lanes stage takes over; and it says why it will not render a scene outside its case."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import volcl
+from imagestats import assert_same_image
+from volcl.errors import VolclError
+from volcl.estimator import Estimator
+from volcl.renderer import Renderer
+
+pytestmark = pytest.mark.every_implementation
+
+SCENES = Path(__file__).resolve().parent.parent / "scenes"
+
+# a chromatic isotropic medium in a box of diffuse walls, two point lights in it: the chromatic
+# distance sampler, the isotropic phase function and the pick between lights
+CHROMATIC = """<scene version="3.0.0">
+    <integrator type="volpath"/>
+    <medium type="homogeneous" id="haze">
+        <rgb name="sigma_t" value="0.4, 0.25, 0.1"/>
+        <rgb name="albedo" value="0.9, 0.7, 0.5"/>
+        <phase type="isotropic"/>
+    </medium>
+    <sensor type="perspective">
+        <float name="fov" value="60"/>
+        <transform name="to_world"><lookat origin="0, 0, 3.5" target="0, 0, 0" up="0, 1, 0"/></transform>
+        <ref id="haze"/>
+        <film type="hdrfilm"><integer name="width" value="24"/><integer name="height" value="18"/></film>
+    </sensor>
+    <emitter type="point"><point name="position" value="0.5, 0.6, 0"/><rgb name="intensity" value="3, 3, 3"/></emitter>
+    <emitter type="point"><point name="position" value="-0.7, -0.3, -0.5"/><rgb name="intensity" value="1, 2, 4"/></emitter>
+    <shape type="cube">
+        <bsdf type="diffuse"><rgb name="reflectance" value="0.6, 0.6, 0.6"/></bsdf>
+        <transform name="to_world"><scale value="2"/></transform>
+        <ref name="exterior" id="haze"/>
+    </shape>
+</scene>"""
+
+ESTIMATORS = {
+    "default": Estimator(),
+    "one-sample MIS": Estimator(equiangular_mis="one"),
+    "MIS off": Estimator(mis=False),
+    "equiangular off": Estimator(equiangular="off"),
+    "NEE off": Estimator(nee=False),
+}
+
+
+def _scene(name):
+    if name == "chromatic":
+        return volcl.load_string(CHROMATIC)
+    return volcl.load_file(SCENES / "point_in_fog.xml", width=32, height=24)
+
+
+def _pair(device, scene, estimator, spp, seeds=(3, 3)):
+    mk = Renderer(scene, device=device, estimator=estimator, seed=seeds[0]).render(spp)
+    r = Renderer(scene, device=device, estimator=estimator, seed=seeds[1], engine="wavefront")
+    assert r.engine == "wavefront"
+    return mk, r.render(spp)
+
+
+@pytest.mark.parametrize("what", sorted(ESTIMATORS))
+def test_same_paths_as_megakernel(device, what):
+    """One seed: nearly every pixel within 1e-3 of the megakernel's (exp, log and sqrt of the vector
+    stage round differently; a path a rounding sends another way changes its pixel more)."""
+    if device.kind != "cpu":
+        pytest.skip("the wavefront renderer is for CPU devices")
+    mk, wf = _pair(device, _scene("point_in_fog"), ESTIMATORS[what], 8)
+    assert wf.invalid == 0 and mk.invalid == 0
+    rel = np.abs(wf.image - mk.image) / np.maximum(np.abs(mk.image), 1e-6)
+    assert np.mean(rel > 1e-3) < 0.01, f"{np.mean(rel > 1e-3):.3%} of pixel channels differ by more than 1e-3"
+    np.testing.assert_allclose(wf.image.mean(), mk.image.mean(), rtol=1e-3)
+
+
+@pytest.mark.parametrize("name", ["point_in_fog", "chromatic"])
+def test_same_image_as_megakernel(device, name):
+    """Two seeds: the same image within the standard errors, over 4 x 4 blocks; and one seed, the
+    chromatic scene's paths too."""
+    if device.kind != "cpu":
+        pytest.skip("the wavefront renderer is for CPU devices")
+    scene = _scene(name)
+    mk, wf = _pair(device, scene, Estimator(), 64, seeds=(1, 2))
+    assert_same_image(mk, wf, what=f"{name}: megakernel and wavefront")
+    mk, wf = _pair(device, scene, Estimator(), 8)
+    rel = np.abs(wf.image - mk.image) / np.maximum(np.abs(mk.image), 1e-6)
+    assert np.mean(rel > 1e-3) < 0.01
+
+
+def test_says_why_not(device):
+    """A scene without media (the lanes stage's case) is refused by name, not rendered otherwise."""
+    cbox = volcl.load_file(SCENES / "cbox.xml", width=8, height=8)
+    with pytest.raises(VolclError, match="wavefront renderer cannot render this scene"):
+        Renderer(cbox, device=device, engine="wavefront")
+    with pytest.raises(VolclError, match="engine"):
+        Renderer(cbox, device=device, engine="lanes")

@@ -1,0 +1,144 @@
+"""The wavefront renderer: a render_pass launch (kernels/render.cl) done as a loop of two stage
+kernels over the same work-items, so that the medium steps of homogeneous media run in the CPU's
+SIMD lanes.
+
+volcl's megakernel takes one path per work-item through everything, and no CPU runtime vectorizes
+it (README, "Can a wavefront stage run in the SIMD lanes?"). Here each work-item's path keeps its
+state in device arrays between launches (kernels/wavefront_state.h), and every step is two
+launches: the scalar stage (kernels/wavefront.cl: shadow rays, surface events, roulette, the
+accumulators and the next sample, the next ray's closest hit, with the megakernel's functions) and
+the lanes stage (kernels/wavefront_lanes.cl: the medium segment, written for the vectorizers).
+A path renders its work-item's samples into the same accumulator entry in the same order as the
+megakernel, drawing the same random numbers, so everything built on render_pass (slots, tiles,
+checkpoints, several devices) works unchanged; the images agree with the megakernel's up to the
+roundings of the lanes stage's arithmetic (vector exp, log and sqrt), and where a rounding sends a
+path another way.
+
+It renders scenes whose media are all homogeneous and whose lights are all point lights (the lanes
+stage's case), with the path integrator, on CPU devices. It is not volcl's default: on point_in_fog
+it is still slower than the megakernel (README, "The wavefront renderer"), so a Renderer uses it
+only when asked (Renderer(engine="wavefront")).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from . import layout
+from .opencl import cl
+from .pack import ARG_ORDER
+
+# kernels/wavefront_state.h: rows of the state arrays, their stride, the flag that a path is alive,
+# the event of a path about to start a sample, and the lanes stage's table of lights and media
+FLOAT_ROWS = 42
+INT_ROWS = 13
+STRIDE = 65536
+ROW_FLAGS = 2
+ROW_EVENT = 5
+FLAG_ALIVE = 1
+EVENT_START = 17
+TABLE_STRIDE = 64
+TABLE_ROWS = 15
+T_LIGHT_POS, T_LIGHT_VALUE, T_SIGMA_T, T_ALBEDO, T_G, T_ISO, T_LANES = 0, 3, 6, 9, 12, 13, 14
+# steps between looks at whether every path has finished (each look waits for the queue)
+CHECK_EVERY = 8
+# paths in flight (at most STRIDE): few enough for their state (about 220 bytes each) to stay in the
+# caches: on point_in_fog (AVX-512 host, PoCL) 4096 took 2.23 s, 2048 2.37 s, 16384 2.49 s,
+# 65536 4.28 s
+PATHS = 4096
+
+LANES_FILE = "wavefront_lanes.cl"
+SCALAR_FILE = "wavefront.cl"
+
+ENGINES = ("megakernel", "wavefront")
+
+
+def supported(features: dict, packed, params, device) -> str | None:
+    """Why the wavefront renderer cannot render this, or None when it can: a CPU, media all
+    homogeneous, lights all point lights."""
+    if device.kind != "cpu":
+        return "the lanes stage is written for CPU vectorizers; a GPU runs the megakernel's work-items in lanes already"
+    if not features.get("MEDIA"):
+        return "the scene has no medium, which the lanes stage steps through"
+    for name in ("GRID_MEDIA", "EMISSIVE_MEDIA", "EMISSION_NEE", "PHASE_FAMILIES", "DIRECT"):
+        if features.get(name):
+            return f"feature {name} is not in the lanes stage"
+    lights, media = packed.arrays["lights"], packed.arrays["media"]
+    if len(lights) == 0 or not np.all(lights["type"] == layout.LIGHT_TYPES["point"]):
+        return "the lanes stage samples point lights only"
+    if max(len(lights), len(media)) > TABLE_STRIDE:
+        return f"the lanes stage's table holds {TABLE_STRIDE} lights and media"
+    if int(params["integrator"]) != layout.INTEGRATORS["path"]:
+        return "the lanes stage is the path integrator's"
+    return None
+
+
+def lanes_table(packed) -> np.ndarray:
+    """The lights' and media's parameters the lanes stage reads (wavefront_state.h's table)."""
+    t = np.zeros((TABLE_ROWS, TABLE_STRIDE), np.float32)
+    lights, media = packed.arrays["lights"], packed.arrays["media"]
+    t[T_LIGHT_POS:T_LIGHT_POS + 3, :len(lights)] = lights["position"].T
+    t[T_LIGHT_VALUE:T_LIGHT_VALUE + 3, :len(lights)] = lights["value"].T
+    t[T_SIGMA_T:T_SIGMA_T + 3, :len(media)] = media["sigma_t"].T
+    t[T_ALBEDO:T_ALBEDO + 3, :len(media)] = media["albedo"].T
+    hg = media["phase"] == layout.PHASE_TYPES["hg"]
+    t[T_G, :len(media)] = np.where(hg, media["g"], 0.0)
+    t[T_ISO, :len(media)] = media["phase"] == layout.PHASE_TYPES["isotropic"]
+    t[T_LANES, :len(media)] = (media["type"] == layout.MEDIUM_TYPES["homogeneous"]) & (t[T_ISO, :len(media)] + hg > 0)
+    return t
+
+
+class Wavefront:
+    """The stage kernels of one Renderer's feature set, and the loop that runs them."""
+
+    def __init__(self, device, features: dict, packed, group_items: int, paths: int = PATHS):
+        self.device = device
+        program = device.program(features, SCALAR_FILE)
+        self.scalar = cl.Kernel(program, "wavefront_scalar")
+        self.add = cl.Kernel(program, "wavefront_add")
+        self.lanes = cl.Kernel(device.program(features, LANES_FILE), "wavefront_medium")
+        self.group_items = group_items
+        self.paths = -(-min(paths, STRIDE) // group_items) * group_items
+        mf = cl.mem_flags
+        ctx = device.ctx
+        self.table = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=lanes_table(packed))
+        self.fs = cl.Buffer(ctx, mf.READ_WRITE, 4 * FLOAT_ROWS * STRIDE)
+        self.is_ = cl.Buffer(ctx, mf.READ_WRITE, 4 * INT_ROWS * STRIDE)
+        self.next_job = cl.Buffer(ctx, mf.READ_WRITE, 4)
+        # zeroed once, so that no stage reads a word never written
+        cl.enqueue_copy(device.queue, self.fs, np.zeros(FLOAT_ROWS * STRIDE, np.float32))
+        cl.enqueue_copy(device.queue, self.is_, np.zeros(INT_ROWS * STRIDE, np.int32))
+        self.results = None
+        self.steps = 0          # stage pairs launched so far (benchmarks read it)
+
+    def run(self, scene_args, accum, launch_args, items: int):
+        """Everything render_pass(scene_args, accum, launch_args) would render over `items`
+        work-items (scene_args in volcl.pack.ARG_ORDER; launch_args: sample_base, tile x, y, width,
+        pixels, first, count, slots, passes)."""
+        queue = self.device.queue
+        passes = int(launch_args[-1])
+        jobs = items * passes
+        if self.results is None or self.results.size < 16 * jobs:
+            self.results = cl.Buffer(self.device.ctx, cl.mem_flags.READ_WRITE, 16 * jobs)
+        n = min(self.paths, -(-jobs // self.group_items) * self.group_items)
+        ints = np.zeros((2, n), np.int32)
+        ints[0] = FLAG_ALIVE
+        ints[1] = EVENT_START
+        for k, row in enumerate((ROW_FLAGS, ROW_EVENT)):
+            cl.enqueue_copy(queue, self.is_, ints[k], dst_offset=4 * row * STRIDE)
+        cl.enqueue_copy(queue, self.next_job, np.zeros(1, np.int32))
+        params = dict(zip(ARG_ORDER, scene_args))["params"]
+        self.lanes.set_args(self.fs, self.is_, self.table, params)
+        self.scalar.set_args(*scene_args, self.results, self.next_job, *launch_args, self.fs, self.is_)
+        size, local = (n,), (self.group_items,)
+        flags = np.empty(n, np.int32)
+        while True:
+            for _ in range(CHECK_EVERY):
+                cl.enqueue_nd_range_kernel(queue, self.scalar, size, local)
+                cl.enqueue_nd_range_kernel(queue, self.lanes, size, local)
+                self.steps += 1
+            cl.enqueue_copy(queue, flags, self.is_, src_offset=4 * ROW_FLAGS * STRIDE)
+            if not np.any(flags & FLAG_ALIVE):
+                break
+        t = launch_args
+        self.add.set_args(self.results, *accum, t[4], t[5], t[6], t[7], t[8])
+        cl.enqueue_nd_range_kernel(queue, self.add, (-(-items // self.group_items) * self.group_items,), local)
