@@ -116,6 +116,24 @@ inline PathState wf_start_job(const SceneData *sc, __global const float *filter_
     return path_start(sc, o, d, t_max);
 }
 
+/* NEE from a collision towards a light the lanes stage does not sample (WF_FLAG_NEE), as
+ * path_medium_event does it: the light is not point-like, so the equiangular weight is 1 and
+ * the phase function's value and pdf are MIS'd with it; the throughput is the path's (the phase
+ * samplers of the lanes stage have weight 1). */
+inline float3 wf_nee(const SceneData *sc, __global const float *fs, int i, const PathState *ps, Rng *rng,
+                     uint *cut) {
+    int r = WF_SHADOW(1);
+    float3 p = wf_get3(fs, r + WF_SHADOW_O, i), d_in = wf_get3(fs, r + WF_SHADOW_D, i);
+    float3 u = wf_get3(fs, r + WF_SHADOW_C, i);
+    LightSample ls;
+    if (!light_sample(sc, p, u.x, (float2)(u.y, u.z), &ls) || !(max_component(ls.value) > 0.0f))
+        return (float3)(0.0f);
+    __global const Medium *m = &sc->media[ps->medium];
+    float ph_pdf;
+    float ph = phase_eval_pdf(sc, m, d_in, ls.wi, &ph_pdf);
+    return ps->beta * nee_contribution(sc, &ls, (float3)(ph), ph_pdf, p, ps->medium, rng, cut);
+}
+
 VOLCL_KERNEL void wavefront_scalar(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
                           __global const Triangle *triangles, __global const TriangleNormals *normals,
                           __global const Sphere *spheres, __global const Cylinder *cylinders,
@@ -153,6 +171,7 @@ VOLCL_KERNEL void wavefront_scalar(__global const BvhWideNode *nodes, __global c
         } else {
             if (flags & WF_FLAG_SHADOW0) ps.L += wf_shadow(&sc, fs, i, 0, ps.medium, &rng, &cut);
             if (flags & WF_FLAG_SHADOW1) ps.L += wf_shadow(&sc, fs, i, 1, ps.medium, &rng, &cut);
+            if (flags & WF_FLAG_NEE) ps.L += wf_nee(&sc, fs, i, &ps, &rng, &cut);
         }
         if (event == PATH_SURFACE) event = path_surface_event(&sc, &rng, &ps, hit, &h, &cut);
         if (event == PATH_CONTINUE && !path_roulette(&sc, &rng, &ps)) event = PATH_END;

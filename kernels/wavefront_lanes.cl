@@ -3,7 +3,8 @@
  * the CPU runtimes run 8 or 16 paths per instruction. It is path_medium_event (integrator.h) for
  * that case, draw for draw: the equiangular sample towards a point light, the free flight, NEE from
  * the collision and the phase function's new direction, with the same random numbers in the same
- * order. What needs a BVH query is left to the scalar stage (kernels/wavefront.cl): the two shadow
+ * order. NEE towards a light other than a point light is left to the scalar stage, with the numbers
+ * drawn for it here (WF_FLAG_NEE). What needs a BVH query is left to the scalar stage (kernels/wavefront.cl): the two shadow
  * rays are written out with the radiance they add if nothing blocks them, before their
  * transmittance (homogeneous media draw no random numbers for it, so tracing them later changes
  * nothing). Paths in no medium go on to their surface; paths in other media keep WF_EV_MEDIUM and
@@ -100,9 +101,11 @@ __kernel void wavefront_medium(__global float *fs, __global int *is, __global co
     float u_pick_e = rng32_float_if(&rng, eq_sample), u_e = rng32_float_if(&rng, eq_sample);
     int li_e = clamp((int)(u_pick_e * (float)count), 0, max(count - 1, 0));
     V3 lp_e = trow3(table, WF_T_LIGHT_POS, li_e);
-    int seg_light = eq_sample ? li_e : -1;
+    /* a light that is not a point light gets no equiangular sample (NEE covers it) */
+    bool eq_point = eq_sample & (TROW(WF_T_POINT, li_e) > 0.0f);
+    int seg_light = eq_point ? li_e : -1;
     EquiangularSegment seg;
-    bool seg_ok = lanes_equiangular_segment(seg_o, d, seg_t, lp_e, &seg) & eq_sample;
+    bool seg_ok = lanes_equiangular_segment(seg_o, d, seg_t, lp_e, &seg) & eq_point;
     float t_e, pdf_e;
     bool eq_ok = equiangular_segment_sample(&seg, u_e, &t_e, &pdf_e) & seg_ok;
     V3 x = v3_madd(seg_o, t_e, d);
@@ -154,16 +157,17 @@ __kernel void wavefront_medium(__global float *fs, __global int *is, __global co
     /* next-event estimation from the collision (light_sample for a point light) */
     bool nee = cont & do_nee;
     float u_pick = rng32_float_if(&rng, nee);
-    rng32_float_if(&rng, nee);      /* light_sample's pair: a point light uses neither */
-    rng32_float_if(&rng, nee);
+    float ul_x = rng32_float_if(&rng, nee), ul_y = rng32_float_if(&rng, nee);  /* a point light uses neither */
     int li = clamp((int)(u_pick * (float)count), 0, max(count - 1, 0));
+    bool point = TROW(WF_T_POINT, li) > 0.0f;
+    bool nee_later = nee & !point;      /* the scalar stage samples other lights */
     V3 lp = trow3(table, WF_T_LIGHT_POS, li);
     V3 vl = v3_sub(lp, p);
     float d2l = v3_dot(vl, vl);
     float dist_l = sqrt(d2l);
     V3 wl = lanes_div(vl, dist_l);
     V3 value = lanes_div(trow3(table, WF_T_LIGHT_VALUE, li), d2l);
-    bool shadow1 = nee & (d2l > 0.0f) & (v3_max(value) > 0.0f);
+    bool shadow1 = nee & point & (d2l > 0.0f) & (v3_max(value) > 0.0f);
 #if VOLCL_HAS_EQUIANGULAR
     /* equiangular_distance_weight: this vertex's share against the equiangular sample */
     EquiangularSegment seg_l;
@@ -197,8 +201,9 @@ __kernel void wavefront_medium(__global float *fs, __global int *is, __global co
     int next = !pending ? event : (mi < 0 ? PATH_SURFACE : (!run ? event
                : (!scattered ? PATH_SURFACE : (ended ? PATH_END : PATH_CONTINUE))));
     IROW(WF_EVENT) = next;
-    uint keep = flags & ~(WF_FLAG_SHADOW0 | WF_FLAG_SHADOW1 | (cont ? WF_FLAG_SPECULAR : 0u));
-    IROW(WF_FLAGS) = (int)(keep | ((run & shadow0) ? WF_FLAG_SHADOW0 : 0u) | (shadow1 ? WF_FLAG_SHADOW1 : 0u));
+    uint keep = flags & ~(WF_FLAG_SHADOW0 | WF_FLAG_SHADOW1 | WF_FLAG_NEE | (cont ? WF_FLAG_SPECULAR : 0u));
+    IROW(WF_FLAGS) = (int)(keep | ((run & shadow0) ? WF_FLAG_SHADOW0 : 0u) | (shadow1 ? WF_FLAG_SHADOW1 : 0u)
+                           | (nee_later ? WF_FLAG_NEE : 0u));
     IROW(WF_DEPTH) = cont ? depth + 1 : depth;
     IROW(WF_RNG) = (int)rng.lo;
     IROW(WF_RNG + 1) = (int)rng.hi;
@@ -214,7 +219,7 @@ __kernel void wavefront_medium(__global float *fs, __global int *is, __global co
     FROW(WF_SHADOW(0) + WF_SHADOW_T) = dist * 0.9999f;
     frow3_put(fs, WF_SHADOW(0) + WF_SHADOW_C, i, c_e);
     frow3_put(fs, WF_SHADOW(1) + WF_SHADOW_O, i, p);
-    frow3_put(fs, WF_SHADOW(1) + WF_SHADOW_D, i, wl);
+    frow3_put(fs, WF_SHADOW(1) + WF_SHADOW_D, i, v3_sel(nee_later, d, wl));
     FROW(WF_SHADOW(1) + WF_SHADOW_T) = dist_l * 0.9999f;
-    frow3_put(fs, WF_SHADOW(1) + WF_SHADOW_C, i, c_l);
+    frow3_put(fs, WF_SHADOW(1) + WF_SHADOW_C, i, v3_sel(nee_later, v3(u_pick, ul_x, ul_y), c_l));
 }

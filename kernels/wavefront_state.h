@@ -11,7 +11,7 @@
 #ifndef VOLCL_WAVEFRONT_STATE_H
 #define VOLCL_WAVEFRONT_STATE_H
 
-#define WF_STRIDE 65536
+#define WF_STRIDE 65552
 #define WF_AT(r) ((r) * WF_STRIDE + i)
 
 /* The lights' and media's parameters the lanes stage reads, as rows of WF_TABLE_STRIDE words (light
@@ -25,7 +25,8 @@
 #define WF_T_G 12               /* HG's g, or 0 for the isotropic phase function */
 #define WF_T_ISO 13             /* 1 for the isotropic phase function, else 0 */
 #define WF_T_LANES 14           /* 1 where the lanes stage handles the medium (homogeneous), else 0 */
-#define WF_TABLE_ROWS 15
+#define WF_T_POINT 15           /* 1 for a point light, which the lanes stage samples itself, else 0 */
+#define WF_TABLE_ROWS 16
 
 /* float rows */
 #define WF_L 0              /* 3 rows each: x, y, z */
@@ -69,6 +70,10 @@
 #define WF_FLAG_HIT 8u      /* the ray traced last hit a surface (WF_HIT_*) */
 #define WF_FLAG_SHADOW0 16u /* shadow ray 0 is to be traced */
 #define WF_FLAG_SHADOW1 32u
+/* NEE from the collision picked a light other than a point light: light_sample is the scalar stage's,
+ * from the collision at shadow ray 1's origin, the direction before scattering in its direction
+ * slot, and the three numbers the lanes stage drew for it (pick, then the pair) in its radiance slot */
+#define WF_FLAG_NEE 64u
 
 /* WF_EVENT: what the next stage does with the path, beyond integrator.h's PATH_* codes */
 #define WF_EV_MEDIUM 16     /* the ray is traced: its medium segment is next */

@@ -57,7 +57,7 @@ def _scene(name):
 
 
 def _pair(device, scene, estimator, spp, seeds=(3, 3)):
-    mk = Renderer(scene, device=device, estimator=estimator, seed=seeds[0]).render(spp)
+    mk = Renderer(scene, device=device, estimator=estimator, seed=seeds[0], engine="megakernel").render(spp)
     r = Renderer(scene, device=device, estimator=estimator, seed=seeds[1], engine="wavefront")
     assert r.engine == "wavefront"
     return mk, r.render(spp)
@@ -88,6 +88,17 @@ def test_same_image_as_megakernel(device, name):
     mk, wf = _pair(device, scene, Estimator(), 8)
     rel = np.abs(wf.image - mk.image) / np.maximum(np.abs(mk.image), 1e-6)
     assert np.mean(rel > 1e-3) < 0.01
+
+
+def test_auto_takes_it_where_it_pays(device):
+    """"auto" (the default) renders point_in_fog (camera in the fog, a point light) with the wavefront
+    renderer on CPUs, and the fog box (an area light) and the Cornell box (no medium) with the
+    megakernel."""
+    expected = {"point_in_fog": "wavefront" if device.kind == "cpu" else "megakernel", "fog": "megakernel",
+                "cbox": "megakernel"}
+    for name, engine in expected.items():
+        r = Renderer(volcl.load_file(SCENES / f"{name}.xml", width=8, height=8), device=device)
+        assert r.engine == engine, name
 
 
 def test_says_why_not(device):

@@ -69,8 +69,8 @@ class Renderer:
     accumulating sample passes.
 
     `slots` and `launch_pixels` (pixels per launch) override the defaults, for tests.
-    `engine` "wavefront" renders with volcl.wavefront's stage kernels instead of the megakernel
-    (homogeneous media and point lights on CPUs; the same samples, not yet faster).
+    `engine`: "megakernel", "wavefront" (volcl.wavefront's stage kernels: homogeneous media on
+    CPUs, the same samples), or "auto": the wavefront renderer where volcl.wavefront.pays().
     `launch_seconds` is the time budget of one launch: by default GPU_LAUNCH_SECONDS on GPUs and
     none elsewhere (a CPU device runs fixed launches of up to MAX_ITEMS work items, with no timing
     in between). `majorant_cells` applies when a model Scene is packed here.
@@ -81,7 +81,7 @@ class Renderer:
     def __init__(self, scene, device=None, features: dict | None = None, seed: int | None = None,
                  slots: int | None = None, launch_pixels: int | None = None, launch_seconds=_DEFAULT,
                  majorant_cells: int | None = None, majorant_scale: float = 1.0,
-                 estimator: Estimator | None = None, tile=None, engine: str = "megakernel"):
+                 estimator: Estimator | None = None, tile=None, engine: str = "auto"):
         if isinstance(scene, ModelScene):
             scene = PreparedScene(scene, majorant_cells=majorant_cells)
         elif majorant_cells is not None:
@@ -143,14 +143,17 @@ class Renderer:
             self.build_seconds, self.cold_build_seconds, self.build_was_cold = 0.0, None, False
 
     def _wavefront(self, engine: str):
-        """The wavefront renderer (volcl.wavefront) where `engine` asks for it, else None."""
+        """The wavefront renderer (volcl.wavefront) where `engine` asks for it, or allows it
+        ("auto") where it supports the scene and pays; else None (the megakernel)."""
         if engine not in wavefront.ENGINES:
             raise VolclError(f"engine {engine!r}: expected one of {', '.join(wavefront.ENGINES)}")
         if engine == "megakernel":
             return None
         why_not = wavefront.supported(self.features, self.packed, self.params, self.device)
-        if why_not is not None:
+        if why_not is not None and engine == "wavefront":
             raise VolclError(f"the wavefront renderer cannot render this scene: {why_not}")
+        if why_not is not None or (engine == "auto" and not wavefront.pays(self.packed, self.params)):
+            return None
         return wavefront.Wavefront(self.device, self.features, self.packed, self.group_items)
 
     @property

@@ -14,10 +14,9 @@ checkpoints, several devices) works unchanged; the images agree with the megaker
 roundings of the lanes stage's arithmetic (vector exp, log and sqrt), and where a rounding sends a
 path another way.
 
-It renders scenes whose media are all homogeneous and whose lights are all point lights (the lanes
-stage's case), with the path integrator, on CPU devices. It is not volcl's default: on point_in_fog
-it is still slower than the megakernel (README, "The wavefront renderer"), so a Renderer uses it
-only when asked (Renderer(engine="wavefront")).
+It renders scenes whose media are all homogeneous, with the path integrator, on CPU devices; the
+lanes stage samples point lights itself and leaves NEE towards other lights to the scalar stage. A
+Renderer takes it by itself ("auto") where it pays (pays()), or when asked (engine="wavefront").
 """
 from __future__ import annotations
 
@@ -31,14 +30,14 @@ from .pack import ARG_ORDER
 # the event of a path about to start a sample, and the lanes stage's table of lights and media
 FLOAT_ROWS = 42
 INT_ROWS = 13
-STRIDE = 65536
+STRIDE = 65552
 ROW_FLAGS = 2
 ROW_EVENT = 5
 FLAG_ALIVE = 1
 EVENT_START = 17
 TABLE_STRIDE = 64
-TABLE_ROWS = 15
-T_LIGHT_POS, T_LIGHT_VALUE, T_SIGMA_T, T_ALBEDO, T_G, T_ISO, T_LANES = 0, 3, 6, 9, 12, 13, 14
+TABLE_ROWS = 16
+T_LIGHT_POS, T_LIGHT_VALUE, T_SIGMA_T, T_ALBEDO, T_G, T_ISO, T_LANES, T_POINT = 0, 3, 6, 9, 12, 13, 14, 15
 # steps between looks at whether every path has finished (each look waits for the queue)
 CHECK_EVERY = 8
 # paths in flight (at most STRIDE): few enough for their state (about 220 bytes each) to stay in the
@@ -49,27 +48,36 @@ PATHS = 4096
 LANES_FILE = "wavefront_lanes.cl"
 SCALAR_FILE = "wavefront.cl"
 
-ENGINES = ("megakernel", "wavefront")
+ENGINES = ("auto", "megakernel", "wavefront")
 
 
 def supported(features: dict, packed, params, device) -> str | None:
     """Why the wavefront renderer cannot render this, or None when it can: a CPU, media all
-    homogeneous, lights all point lights."""
+    homogeneous, no spot lights."""
     if device.kind != "cpu":
         return "the lanes stage is written for CPU vectorizers; a GPU runs the megakernel's work-items in lanes already"
     if not features.get("MEDIA"):
         return "the scene has no medium, which the lanes stage steps through"
-    for name in ("GRID_MEDIA", "EMISSIVE_MEDIA", "EMISSION_NEE", "PHASE_FAMILIES", "DIRECT"):
+    for name in ("GRID_MEDIA", "EMISSIVE_MEDIA", "EMISSION_NEE", "PHASE_FAMILIES", "DIRECT", "SPOT_LIGHTS"):
         if features.get(name):
             return f"feature {name} is not in the lanes stage"
     lights, media = packed.arrays["lights"], packed.arrays["media"]
-    if len(lights) == 0 or not np.all(lights["type"] == layout.LIGHT_TYPES["point"]):
-        return "the lanes stage samples point lights only"
     if max(len(lights), len(media)) > TABLE_STRIDE:
         return f"the lanes stage's table holds {TABLE_STRIDE} lights and media"
     if int(params["integrator"]) != layout.INTEGRATORS["path"]:
         return "the lanes stage is the path integrator's"
     return None
+
+
+def pays(packed, params) -> bool:
+    """Whether "auto" takes the wavefront renderer for a scene it supports: where the lanes stage
+    does most of the work, the camera inside a medium (every camera segment is a medium segment) lit
+    by point lights alone (all NEE in the lanes). Measured on the shipped scenes (README, "The
+    wavefront renderer"): point_in_fog 1.23x the megakernel's speed on PoCL and 1.44x on Intel's
+    runtime; scenes with area or environment lights, or the camera outside the medium, 0.45x-0.83x."""
+    lights = packed.arrays["lights"]
+    return (int(params["camera_medium"]) >= 0 and len(lights) > 0
+            and bool(np.all(lights["type"] == layout.LIGHT_TYPES["point"])))
 
 
 def lanes_table(packed) -> np.ndarray:
@@ -84,6 +92,7 @@ def lanes_table(packed) -> np.ndarray:
     t[T_G, :len(media)] = np.where(hg, media["g"], 0.0)
     t[T_ISO, :len(media)] = media["phase"] == layout.PHASE_TYPES["isotropic"]
     t[T_LANES, :len(media)] = (media["type"] == layout.MEDIUM_TYPES["homogeneous"]) & (t[T_ISO, :len(media)] + hg > 0)
+    t[T_POINT, :len(lights)] = lights["type"] == layout.LIGHT_TYPES["point"]
     return t
 
 
