@@ -32,20 +32,7 @@ inline void render_sample(const SceneData *sc, __global const float *filter_tabl
     sample_add(L, cut, out, sums, sums_sq, invalid, cutoffs);
 }
 
-VOLCL_KERNEL void render_pass(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
-                          __global const Triangle *triangles, __global const TriangleNormals *normals,
-                          __global const Sphere *spheres, __global const Cylinder *cylinders,
-                          __global const ShapeInfo *shapes,
-                          __global const Bsdf *bsdfs, __global const Light *lights,
-                          __global const float *light_tri_cdf, __global const int *light_tris,
-                          __global const float *env_data,
-                          __global const Medium *media, __global const GridVolume *grids,
-                          __global const float *grid_data, __global const RenderParams *params,
-                          __global const float *filter_table, __global const TriangleUv *tri_uvs,
-                          __global const UvMap *uv_maps, __global const Texture *textures,
-                          __global const float *texels, __global const float *bsdf_tables,
-                          __global const PhaseLobe *phase_lobes, __global const float *phase_tables,
-                          __global const Instance *instances,
+VOLCL_KERNEL void render_pass(VOLCL_SCENE_ARGS,
                           __global float4 *sums, __global float4 *sums_sq, __global uint *invalid,
                           __global uint *cutoffs,
                           uint sample_base, int tile_x, int tile_y, int tile_w, int tile_pixels,
@@ -56,9 +43,7 @@ VOLCL_KERNEL void render_pass(__global const BvhWideNode *nodes, __global const 
     int tp = first + gid % count;    /* the pixel's index in the tile */
     int px = tile_x + tp % tile_w, py = tile_y + tp / tile_w;
     int pixel = py * params->width + px;
-    SceneData sc = {nodes, leaves, triangles, normals, spheres, cylinders, shapes, bsdfs, lights,
-                    light_tri_cdf, light_tris, env_data, media, grids, grid_data, params, tri_uvs, uv_maps,
-                    textures, texels, bsdf_tables, phase_lobes, phase_tables, instances};
+    SceneData sc = VOLCL_SCENE_DATA;
     int out = slot * tile_pixels + tp;
     /* pass j adds sample sample_base + j * slots + slot: the additions to this slot come in the
      * order separate launches would make them, so the sums have the same bits */

@@ -134,29 +134,15 @@ inline float3 wf_nee(const SceneData *sc, __global const float *fs, int i, const
     return ps->beta * nee_contribution(sc, &ls, (float3)(ph), ph_pdf, p, ps->medium, rng, cut);
 }
 
-VOLCL_KERNEL void wavefront_scalar(__global const BvhWideNode *nodes, __global const LeafPacket *leaves,
-                          __global const Triangle *triangles, __global const TriangleNormals *normals,
-                          __global const Sphere *spheres, __global const Cylinder *cylinders,
-                          __global const ShapeInfo *shapes,
-                          __global const Bsdf *bsdfs, __global const Light *lights,
-                          __global const float *light_tri_cdf, __global const int *light_tris,
-                          __global const float *env_data,
-                          __global const Medium *media, __global const GridVolume *grids,
-                          __global const float *grid_data, __global const RenderParams *params,
-                          __global const float *filter_table, __global const TriangleUv *tri_uvs,
-                          __global const UvMap *uv_maps, __global const Texture *textures,
-                          __global const float *texels, __global const float *bsdf_tables,
-                          __global const PhaseLobe *phase_lobes, __global const float *phase_tables,
-                          __global const Instance *instances,
+VOLCL_KERNEL void wavefront_scalar(VOLCL_SCENE_ARGS,
                           __global float4 *results, __global int *next_job,
                           uint sample_base, int tile_x, int tile_y, int tile_w, int tile_pixels,
                           int first, int count, int slots, int passes,
                           __global float *fs, __global int *is) {
     int i = (int)get_global_id(0);      /* the path's place in the wave */
+    (void)tile_pixels;                  /* render_pass's arguments all; wavefront_add places the sums */
     if (!((uint)IROW(WF_FLAGS) & WF_FLAG_ALIVE)) return;
-    SceneData sc = {nodes, leaves, triangles, normals, spheres, cylinders, shapes, bsdfs, lights,
-                    light_tri_cdf, light_tris, env_data, media, grids, grid_data, params, tri_uvs, uv_maps,
-                    textures, texels, bsdf_tables, phase_lobes, phase_tables, instances};
+    SceneData sc = VOLCL_SCENE_DATA;
     int event = IROW(WF_EVENT), job = IROW(WF_JOB), steps = IROW(WF_STEPS);
     uint cut = (uint)IROW(WF_CUTOFFS);
     PathState ps;

@@ -10,11 +10,10 @@
  * nothing). Paths in no medium go on to their surface; paths in other media keep WF_EV_MEDIUM and
  * the scalar stage runs path_medium_event for them.
  *
- * Built as its own program, every function inlined: LLVM's loop vectorizer (PoCL) stops at a call
- * left out of line, and the renderer's helpers used here are plain `inline` (PoCL's headers define
- * `inline` too). */
-#undef inline
-#define inline inline __attribute__((always_inline))
+ * Built as its own program, every function inlined (the pragma below marks every function declared
+ * up to the kernel always_inline): LLVM's loop vectorizer (PoCL) stops at a call left out of line,
+ * and the renderer's helpers used here are plain `inline`. */
+#pragma clang attribute push (__attribute__((always_inline)), apply_to = function)
 #include "renderer.h"
 #include "lanes.h"
 #include "wavefront_state.h"
@@ -63,11 +62,13 @@ inline float lanes_distance_pdf(V3 sigma_t, V3 beta, V3 tr) {
 
 inline V3 lanes_div(V3 v, float s) { return v3(v.x / s, v.y / s, v.z / s); }
 
+#pragma clang attribute pop
+
 /* No bounds test: the host launches whole work-groups over the wave (a store under a condition would
  * stop the vectorizer); paths past the wave's end are never alive. */
 __kernel void wavefront_medium(__global float *fs, __global int *is, __global const float *table,
                                __global const RenderParams *rp) {
-    int i = get_global_id(0);
+    int i = (int)get_global_id(0);
     int event = IROW(WF_EVENT), mi = IROW(WF_MEDIUM), depth = IROW(WF_DEPTH);
     uint flags = (uint)IROW(WF_FLAGS);
     bool pending = event == WF_EV_MEDIUM;

@@ -2,7 +2,8 @@
 clang's static analyzer, for the program with every feature compiled in; and every specialization
 (no feature, each feature alone, all features but one) under the same warnings less the
 unused-parameter and unused-variable family (code a specialization compiles out leaves its
-arguments unused, by design). Skipped, with the reason, where clang is absent (`./quickstart test`
+arguments unused, by design). The wavefront renderer's entry points (wavefront.cl, wavefront_lanes.cl)
+are checked with every feature compiled in. Skipped, with the reason, where clang is absent (`./quickstart test`
 installs it)."""
 import shutil
 import subprocess
@@ -32,21 +33,26 @@ def _specializations():
     return out
 
 
-def _compile(args, features):
-    cmd = [CLANG] + FRONT_END + args + build_options(features) + [str(kernels_dir() / "render.cl")]
+ENTRY_POINTS = ["render.cl", "wavefront.cl", "wavefront_lanes.cl"]
+
+
+def _compile(args, features, entry="render.cl"):
+    cmd = [CLANG] + FRONT_END + args + build_options(features) + [str(kernels_dir() / entry)]
     return subprocess.run(cmd, capture_output=True, text=True)
 
 
-def test_every_feature_compiles_without_warnings():
-    r = _compile(WARNINGS + ["-fsyntax-only"], all_features())
+@pytest.mark.parametrize("entry", ENTRY_POINTS)
+def test_every_feature_compiles_without_warnings(entry):
+    r = _compile(WARNINGS + ["-fsyntax-only"], all_features(), entry)
     assert r.returncode == 0 and "warning" not in r.stderr, r.stderr
 
 
-def test_static_analyzer_finds_nothing(tmp_path):
+@pytest.mark.parametrize("entry", ENTRY_POINTS)
+def test_static_analyzer_finds_nothing(tmp_path, entry):
     """clang --analyze follows paths through the kernel (uninitialized reads, dead stores, null
     dereferences) and reports through the same diagnostics."""
     r = _compile(["--analyze", "-Xanalyzer", "-analyzer-output=text", "-o", str(tmp_path / "report")],
-                 all_features())
+                 all_features(), entry)
     assert r.returncode == 0 and "warning" not in r.stderr, r.stderr
 
 

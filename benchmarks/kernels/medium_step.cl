@@ -27,6 +27,7 @@
 #include "trig.h"
 #include "phase.h"
 #include "equiangular.h"
+#include "lanes.h"     /* V3, Rng32 and the routines on them, as the wavefront renderer's lanes stage has them */
 
 #define F_OX 0
 #define F_DX 3
@@ -138,67 +139,18 @@ __kernel void step_auto(STEP_ARGS) {
     step_path(&f, state, rng_state, rng_inc, i, n);
 }
 
-/* ---- The same step in scalar floats. LLVM's loop vectorizer, which PoCL runs on its work-item
- * loops, widens only scalar values: one vector-typed instruction in the loop and it gives up
- * ("instruction return type cannot be vectorized"), as it does at a switch. So a vector here is a
- * struct of three floats, which LLVM splits into scalars, with two rules that keep it split:
- * - Choose between two V3s one component at a time (v3_sel), never `c ? a : b` on whole structs.
- *   The x86-64 calling convention passes and returns a 12-byte struct as {<2 x float>, float};
- *   after inlining, a select or phi of two whole structs stays a select of <2 x float> values,
- *   and that vector stops the loop vectorizer as a float3 does.
- * - No 64-bit values (step_scalar32): the vectorizer sizes its vectors by the widest type in the
- *   loop, so the PCG state's multiply holds a 256-bit register to 4 lanes where 32-bit values
- *   alone fill 8.
- * The routines that are scalar already (equiangular sampling and pdf on a set-up segment,
- * atan2_upper, sincos_turn, log_pos, the HG sampler and value in w) are the renderer's own. */
-typedef struct { float x, y, z; } V3;
-
+/* ---- The same step in scalar floats, in kernels/lanes.h's terms (V3, Rng32, the routines on
+ * them), under the rules lanes.h states. The two this benchmark found: choose between two V3s one
+ * component at a time (v3_sel), never `c ? a : b` on whole structs (the x86-64 calling convention
+ * passes a 12-byte struct as {<2 x float>, float}, and a whole-struct select stays a <2 x float>
+ * select, which stops LLVM's loop vectorizer as a float3 does); and no 64-bit values
+ * (step_scalar32). The routines that are scalar already (equiangular sampling and pdf on a set-up
+ * segment, atan2_upper, sincos_turn, log_pos, the HG sampler and value in w) are the renderer's own. */
 /* Fog with V3 fields: a float3 even in a loop-invariant struct stops the vectorizer */
 typedef struct {
     float sigma, albedo, g;
     V3 light, intensity;
 } FogS;
-
-inline V3 v3(float x, float y, float z) { V3 v = {x, y, z}; return v; }
-inline V3 v3_add(V3 a, V3 b) { return v3(a.x + b.x, a.y + b.y, a.z + b.z); }
-inline V3 v3_sub(V3 a, V3 b) { return v3(a.x - b.x, a.y - b.y, a.z - b.z); }
-inline V3 v3_mul(V3 a, float s) { return v3(a.x * s, a.y * s, a.z * s); }
-inline V3 v3_madd(V3 o, float t, V3 d) { return v3(o.x + t * d.x, o.y + t * d.y, o.z + t * d.z); }
-inline float v3_dot(V3 a, V3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
-inline V3 v3_sel(bool c, V3 a, V3 b) { return v3(c ? a.x : b.x, c ? a.y : b.y, c ? a.z : b.z); }
-
-/* equiangular_segment's set-up (equiangular.h) on V3 */
-inline bool segment_v3(V3 o, V3 d, float t_max, V3 light, EquiangularSegment *s) {
-    V3 v = v3_sub(light, o);
-    s->delta = v3_dot(v, d);
-    V3 perp = v3_madd(v, -s->delta, d);
-    s->h = sqrt(v3_dot(perp, perp));
-    float reach = EQUIANGULAR_SPAN * s->h;
-    s->t0 = fmax(0.0f, s->delta - reach);
-    s->t1 = fmin(t_max, s->delta + reach);
-    s->u0 = s->t0 - s->delta;
-    float u1 = s->t1 - s->delta;
-    s->theta = atan2_upper(s->h * (u1 - s->u0), s->h * s->h + s->u0 * u1);
-    return s->h * s->h > 0.0f && s->t1 > s->t0 && s->theta > 0.0f;
-}
-
-/* phase_direction_at (phase.h) on V3: make_frame's basis about the peak, then normalized */
-inline V3 direction_v3(V3 n, float w, float u) {
-    float sn = sqrt(fmax(0.0f, w * (2.0f - w)));
-    float cp, sp = sincos_turn(u, &cp);
-    float sign = copysign(1.0f, n.z);
-    float a = -1.0f / (sign + n.z);
-    float b = n.x * n.y * a;
-    V3 s = v3(1.0f + sign * n.x * n.x * a, sign * b, -sign * n.x), t = v3(b, sign + n.y * n.y * a, -n.y);
-    float lx = sn * cp, ly = sn * sp, lz = 1.0f - w;
-    V3 r = v3(lx * s.x + ly * t.x + lz * n.x, lx * s.y + ly * t.y + lz * n.y, lx * s.z + ly * t.z + lz * n.z);
-    return v3_mul(r, rsqrt(v3_dot(r, r)));
-}
-
-inline float hg_v3(float g, V3 d_in, V3 d_out) {
-    V3 gap = v3_sub(d_in, v3_mul(d_out, g >= 0.0f ? 1.0f : -1.0f));
-    return phase_hg_eval_w(g, 0.5f * v3_dot(gap, gap));
-}
 
 inline float heuristic(float a, float b) {
     float a2 = a * a, b2 = b * b;
@@ -210,40 +162,16 @@ inline float heuristic(float a, float b) {
 inline V3 light_v3(const FogS *f, V3 x, V3 *wi) {
     V3 v = v3_sub(f->light, x);
     float d2 = v3_dot(v, v), dist = sqrt(d2);
-    *wi = v3_mul(v, 1.0f / dist);
+    *wi = v3_scale(v, 1.0f / dist);
     float k = exp(-f->sigma * dist) / d2;
     return v3(f->intensity.x * k, f->intensity.y * k, f->intensity.z * k);
 }
 
 /* The step's random numbers: the renderer's PCG32 (rng.h), or the same generator with its 64-bit
- * state held as two 32-bit halves. LLVM's loop vectorizer sizes its vectors by the widest type in
- * the loop: one 64-bit integer (the state, its multiply) holds a 256-bit register to 4 lanes, where
- * 32-bit values alone fill 8. The halves give the same numbers, bit for bit. */
-typedef struct { uint lo, hi, inc_lo, inc_hi; } Rng32;
-
-/* the high 32 bits of a 32 x 32-bit product from 16-bit pieces: PoCL's mul_hi widens to 64 bits */
-inline uint mul_hi32(uint a, uint b) {
-    uint a0 = a & 0xFFFFu, a1 = a >> 16, b0 = b & 0xFFFFu, b1 = b >> 16;
-    uint p01 = a0 * b1, p10 = a1 * b0;
-    uint mid = ((a0 * b0) >> 16) + (p01 & 0xFFFFu) + (p10 & 0xFFFFu);
-    return a1 * b1 + (p01 >> 16) + (p10 >> 16) + (mid >> 16);
-}
-
-inline uint rng32_next_uint(Rng32 *r) {
-    uint l = r->lo, h = r->hi;
-    const uint m_lo = 0x4C957F2Du, m_hi = 0x5851F42Du;    /* 6364136223846793005 */
-    uint p_lo = l * m_lo;
-    uint p_hi = mul_hi32(l, m_lo) + l * m_hi + h * m_lo;
-    r->lo = p_lo + r->inc_lo;
-    r->hi = p_hi + r->inc_hi + (r->lo < p_lo ? 1u : 0u);
-    /* ((old >> 18) ^ old) >> 27, its low 32 bits; rot = old >> 59 */
-    uint x_lo = l ^ ((l >> 18) | (h << 14)), x_hi = h ^ (h >> 18);
-    uint xorshifted = (x_lo >> 27) | (x_hi << 5);
-    uint rot = h >> 27;
-    return (xorshifted >> rot) | (xorshifted << ((-rot) & 31u));
-}
-
-inline float rng32_next_float(Rng32 *r) { return (float)(rng32_next_uint(r) >> 8) * (1.0f / 16777216.0f); }
+ * state held as two 32-bit halves (lanes.h's Rng32): LLVM's loop vectorizer sizes its vectors by the
+ * widest type in the loop, so one 64-bit integer (the state, its multiply) holds a 256-bit register
+ * to 4 lanes, where 32-bit values alone fill 8. The halves give the same numbers, bit for bit. */
+inline float rng32_next_float(Rng32 *r) { return rng32_float_if(r, true); }
 
 #define STEP_V3_NAME fog_step_v3
 #define STEP_RNG Rng
@@ -252,14 +180,14 @@ inline float rng32_next_float(Rng32 *r) { return (float)(rng32_next_uint(r) >> 8
 inline void STEP_V3_NAME(const FogS *f, V3 *o, V3 *d, float t_seg, float *beta, V3 *L, STEP_RNG *rng) {
     float sigma_s = f->sigma * f->albedo;
     EquiangularSegment s;
-    bool seg_ok = segment_v3(*o, *d, t_seg, f->light, &s);
+    bool seg_ok = lanes_equiangular_segment(*o, *d, t_seg, f->light, &s);
     float u_e = STEP_RNG_FLOAT(rng);
     float t_e, pdf_e;
     bool eq = seg_ok && equiangular_segment_sample(&s, u_e, &t_e, &pdf_e);
     V3 wi;
     V3 le = light_v3(f, v3_madd(*o, eq ? t_e : 0.0f, *d), &wi);
     float tr = exp(-f->sigma * t_e);
-    float c = eq ? *beta * tr * sigma_s * hg_v3(f->g, *d, wi) * heuristic(pdf_e, f->sigma * tr) / pdf_e : 0.0f;
+    float c = eq ? *beta * tr * sigma_s * lanes_hg_eval(f->g, *d, wi) * heuristic(pdf_e, f->sigma * tr) / pdf_e : 0.0f;
     *L = v3_madd(*L, c, le);
     float u = STEP_RNG_FLOAT(rng);
     float t = -log_pos(1.0f - u) / f->sigma;
@@ -269,10 +197,10 @@ inline void STEP_V3_NAME(const FogS *f, V3 *o, V3 *d, float t_seg, float *beta, 
     V3 p = v3_madd(*o, scattered ? t : 0.0f, *d);
     le = light_v3(f, p, &wi);
     float pdf_eq = seg_ok ? equiangular_segment_pdf(&s, t) : 0.0f;
-    c = scattered ? b * hg_v3(f->g, *d, wi) * heuristic(f->sigma * (1.0f - u), pdf_eq) : 0.0f;
+    c = scattered ? b * lanes_hg_eval(f->g, *d, wi) * heuristic(f->sigma * (1.0f - u), pdf_eq) : 0.0f;
     *L = v3_madd(*L, c, le);
-    V3 peak = v3_mul(*d, f->g >= 0.0f ? 1.0f : -1.0f);
-    V3 nd = direction_v3(peak, phase_hg_sample_w(fabs(f->g), u_w), u_phi);
+    V3 peak = v3_scale(*d, f->g >= 0.0f ? 1.0f : -1.0f);
+    V3 nd = lanes_direction_at(peak, phase_hg_sample_w(fabs(f->g), u_w), u_phi);
     *d = v3_sel(scattered, nd, *d);
     *o = v3_sel(scattered, p, *o);
     *beta = b;
@@ -288,14 +216,14 @@ inline void STEP_V3_NAME(const FogS *f, V3 *o, V3 *d, float t_seg, float *beta, 
 inline void STEP_V3_NAME(const FogS *f, V3 *o, V3 *d, float t_seg, float *beta, V3 *L, STEP_RNG *rng) {
     float sigma_s = f->sigma * f->albedo;
     EquiangularSegment s;
-    bool seg_ok = segment_v3(*o, *d, t_seg, f->light, &s);
+    bool seg_ok = lanes_equiangular_segment(*o, *d, t_seg, f->light, &s);
     float u_e = STEP_RNG_FLOAT(rng);
     float t_e, pdf_e;
     bool eq = seg_ok && equiangular_segment_sample(&s, u_e, &t_e, &pdf_e);
     V3 wi;
     V3 le = light_v3(f, v3_madd(*o, eq ? t_e : 0.0f, *d), &wi);
     float tr = exp(-f->sigma * t_e);
-    float c = eq ? *beta * tr * sigma_s * hg_v3(f->g, *d, wi) * heuristic(pdf_e, f->sigma * tr) / pdf_e : 0.0f;
+    float c = eq ? *beta * tr * sigma_s * lanes_hg_eval(f->g, *d, wi) * heuristic(pdf_e, f->sigma * tr) / pdf_e : 0.0f;
     *L = v3_madd(*L, c, le);
     float u = STEP_RNG_FLOAT(rng);
     float t = -log_pos(1.0f - u) / f->sigma;
@@ -305,10 +233,10 @@ inline void STEP_V3_NAME(const FogS *f, V3 *o, V3 *d, float t_seg, float *beta, 
     V3 p = v3_madd(*o, scattered ? t : 0.0f, *d);
     le = light_v3(f, p, &wi);
     float pdf_eq = seg_ok ? equiangular_segment_pdf(&s, t) : 0.0f;
-    c = scattered ? b * hg_v3(f->g, *d, wi) * heuristic(f->sigma * (1.0f - u), pdf_eq) : 0.0f;
+    c = scattered ? b * lanes_hg_eval(f->g, *d, wi) * heuristic(f->sigma * (1.0f - u), pdf_eq) : 0.0f;
     *L = v3_madd(*L, c, le);
-    V3 peak = v3_mul(*d, f->g >= 0.0f ? 1.0f : -1.0f);
-    V3 nd = direction_v3(peak, phase_hg_sample_w(fabs(f->g), u_w), u_phi);
+    V3 peak = v3_scale(*d, f->g >= 0.0f ? 1.0f : -1.0f);
+    V3 nd = lanes_direction_at(peak, phase_hg_sample_w(fabs(f->g), u_w), u_phi);
     *d = v3_sel(scattered, nd, *d);
     *o = v3_sel(scattered, p, *o);
     *beta = b;
