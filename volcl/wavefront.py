@@ -139,15 +139,25 @@ class Wavefront:
         self.lanes.set_args(self.fs, self.is_, self.table, params)
         self.scalar.set_args(*scene_args, self.results, self.next_job, *launch_args, self.fs, self.is_)
         size, local = (n,), (self.group_items,)
-        flags = np.empty(n, np.int32)
+        # the paths' flags after each batch of steps, read without waiting: the host looks at the
+        # last batch's while the device runs the next (one batch of finished paths at the end is
+        # the price; waiting for every read left the device idle between batches)
+        flags = [np.empty(n, np.int32), np.empty(n, np.int32)]
+        reads = []
         while True:
             for _ in range(CHECK_EVERY):
                 cl.enqueue_nd_range_kernel(queue, self.scalar, size, local)
                 cl.enqueue_nd_range_kernel(queue, self.lanes, size, local)
                 self.steps += 1
-            cl.enqueue_copy(queue, flags, self.is_, src_offset=4 * ROW_FLAGS * STRIDE)
-            if not np.any(flags & FLAG_ALIVE):
-                break
+            host = flags[len(reads) % 2]
+            reads.append((cl.enqueue_copy(queue, host, self.is_, src_offset=4 * ROW_FLAGS * STRIDE,
+                                          is_blocking=False), host))
+            if len(reads) > 1:
+                event, done = reads[-2]
+                event.wait()
+                if not np.any(done & FLAG_ALIVE):
+                    break
+        reads[-1][0].wait()
         t = launch_args
         self.add.set_args(self.results, *accum, t[4], t[5], t[6], t[7], t[8])
         cl.enqueue_nd_range_kernel(queue, self.add, (-(-items // self.group_items) * self.group_items,), local)
