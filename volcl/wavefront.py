@@ -30,7 +30,7 @@ from .pack import ARG_ORDER
 # the event of a path about to start a sample, and the lanes stage's table of lights and media
 FLOAT_ROWS = 42
 INT_ROWS = 13
-STRIDE = 65552
+STRIDE = 8208                   # at most STRIDE - 16 paths in flight (wavefront_state.h)
 ROW_FLAGS = 2
 ROW_EVENT = 5
 FLAG_ALIVE = 1
@@ -40,7 +40,7 @@ TABLE_ROWS = 16
 T_LIGHT_POS, T_LIGHT_VALUE, T_SIGMA_T, T_ALBEDO, T_G, T_ISO, T_LANES, T_POINT = 0, 3, 6, 9, 12, 13, 14, 15
 # steps between looks at whether every path has finished (each look waits for the queue)
 CHECK_EVERY = 8
-# paths in flight (at most STRIDE): few enough for their state (about 220 bytes each) to stay in the
+# paths in flight (at most STRIDE - 16): few enough for their state (about 220 bytes each) to stay in the
 # caches: on point_in_fog (AVX-512 host, PoCL) 4096 took 2.23 s, 2048 2.37 s, 16384 2.49 s,
 # 65536 4.28 s
 PATHS = 4096
@@ -106,7 +106,7 @@ class Wavefront:
         self.add = cl.Kernel(program, "wavefront_add")
         self.lanes = cl.Kernel(device.program(features, LANES_FILE), "wavefront_medium")
         self.group_items = group_items
-        self.paths = -(-min(paths, STRIDE) // group_items) * group_items
+        self.paths = -(-min(paths, STRIDE - 16) // group_items) * group_items
         mf = cl.mem_flags
         ctx = device.ctx
         self.table = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=lanes_table(packed))
