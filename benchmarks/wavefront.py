@@ -10,7 +10,7 @@ less), Renderer.render after a 1-spp warm-up, best of --rounds, the two interlea
 second (wall), the ratios (above 1: the wavefront renderer is faster), the stage pairs it launched, and
 how far its image is from the megakernel's with the same seed (the share of pixel channels that
 differ by more than 1e-3 relative: vector arithmetic rounds differently, and a path a rounding
-sends another way changes its pixel more). --paths sets the paths in flight (at most 8192).
+sends another way changes its pixel more). --paths sets the paths in flight (at most 65536).
 """
 from __future__ import annotations
 

@@ -20,6 +20,9 @@ Renderer takes it by itself ("auto") where it pays (pays()), or when asked (engi
 """
 from __future__ import annotations
 
+import threading
+import weakref
+
 import numpy as np
 
 from . import layout
@@ -30,7 +33,7 @@ from .pack import ARG_ORDER
 # the event of a path about to start a sample, and the lanes stage's table of lights and media
 FLOAT_ROWS = 42
 INT_ROWS = 13
-STRIDE = 8208                   # at most STRIDE - 16 paths in flight (wavefront_state.h)
+STRIDE = 65552                  # at most STRIDE - 16 paths in flight (wavefront_state.h)
 ROW_FLAGS = 2
 ROW_EVENT = 5
 FLAG_ALIVE = 1
@@ -96,6 +99,33 @@ def lanes_table(packed) -> np.ndarray:
     return t
 
 
+class _DeviceState:
+    """The path state arrays of one device (14 MB), shared by its wavefront renderers, one run at a
+    time: a render on several devices makes a Renderer for every tile it hands out."""
+
+    def __init__(self, device):
+        mf = cl.mem_flags
+        self.fs = cl.Buffer(device.ctx, mf.READ_WRITE, 4 * FLOAT_ROWS * STRIDE)
+        self.is_ = cl.Buffer(device.ctx, mf.READ_WRITE, 4 * INT_ROWS * STRIDE)
+        self.next_job = cl.Buffer(device.ctx, mf.READ_WRITE, 4)
+        # zeroed once, so that no stage reads a word never written
+        cl.enqueue_copy(device.queue, self.fs, np.zeros(FLOAT_ROWS * STRIDE, np.float32))
+        cl.enqueue_copy(device.queue, self.is_, np.zeros(INT_ROWS * STRIDE, np.int32))
+        self.lock = threading.Lock()
+
+
+_states: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+_states_lock = threading.Lock()
+
+
+def device_state(device) -> _DeviceState:
+    with _states_lock:
+        state = _states.get(device)
+        if state is None:
+            state = _states[device] = _DeviceState(device)
+        return state
+
+
 class Wavefront:
     """The stage kernels of one Renderer's feature set, and the loop that runs them."""
 
@@ -107,15 +137,8 @@ class Wavefront:
         self.lanes = cl.Kernel(device.program(features, LANES_FILE), "wavefront_medium")
         self.group_items = group_items
         self.paths = -(-min(paths, STRIDE - 16) // group_items) * group_items
-        mf = cl.mem_flags
-        ctx = device.ctx
-        self.table = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=lanes_table(packed))
-        self.fs = cl.Buffer(ctx, mf.READ_WRITE, 4 * FLOAT_ROWS * STRIDE)
-        self.is_ = cl.Buffer(ctx, mf.READ_WRITE, 4 * INT_ROWS * STRIDE)
-        self.next_job = cl.Buffer(ctx, mf.READ_WRITE, 4)
-        # zeroed once, so that no stage reads a word never written
-        cl.enqueue_copy(device.queue, self.fs, np.zeros(FLOAT_ROWS * STRIDE, np.float32))
-        cl.enqueue_copy(device.queue, self.is_, np.zeros(INT_ROWS * STRIDE, np.int32))
+        self.table = cl.Buffer(device.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+                               hostbuf=lanes_table(packed))
         self.results = None
         self.steps = 0          # stage pairs launched so far (benchmarks read it)
 
@@ -123,6 +146,11 @@ class Wavefront:
         """Everything render_pass(scene_args, accum, launch_args) would render over `items`
         work-items (scene_args in volcl.pack.ARG_ORDER; launch_args: sample_base, tile x, y, width,
         pixels, first, count, slots, passes)."""
+        state = device_state(self.device)
+        with state.lock:
+            self._run(state, scene_args, accum, launch_args, items)
+
+    def _run(self, state, scene_args, accum, launch_args, items: int):
         queue = self.device.queue
         passes = int(launch_args[-1])
         jobs = items * passes
@@ -133,11 +161,11 @@ class Wavefront:
         ints[0] = FLAG_ALIVE
         ints[1] = EVENT_START
         for k, row in enumerate((ROW_FLAGS, ROW_EVENT)):
-            cl.enqueue_copy(queue, self.is_, ints[k], dst_offset=4 * row * STRIDE)
-        cl.enqueue_copy(queue, self.next_job, np.zeros(1, np.int32))
+            cl.enqueue_copy(queue, state.is_, ints[k], dst_offset=4 * row * STRIDE)
+        cl.enqueue_copy(queue, state.next_job, np.zeros(1, np.int32))
         params = dict(zip(ARG_ORDER, scene_args))["params"]
-        self.lanes.set_args(self.fs, self.is_, self.table, params)
-        self.scalar.set_args(*scene_args, self.results, self.next_job, *launch_args, self.fs, self.is_)
+        self.lanes.set_args(state.fs, state.is_, self.table, params)
+        self.scalar.set_args(*scene_args, self.results, state.next_job, *launch_args, state.fs, state.is_)
         size, local = (n,), (self.group_items,)
         # the paths' flags after each batch of steps, read without waiting: the host looks at the
         # last batch's while the device runs the next (one batch of finished paths at the end is
@@ -150,7 +178,7 @@ class Wavefront:
                 cl.enqueue_nd_range_kernel(queue, self.lanes, size, local)
                 self.steps += 1
             host = flags[len(reads) % 2]
-            reads.append((cl.enqueue_copy(queue, host, self.is_, src_offset=4 * ROW_FLAGS * STRIDE,
+            reads.append((cl.enqueue_copy(queue, host, state.is_, src_offset=4 * ROW_FLAGS * STRIDE,
                                           is_blocking=False), host))
             if len(reads) > 1:
                 event, done = reads[-2]

@@ -173,15 +173,14 @@ inline V3 light_v3(const FogS *f, V3 x, V3 *wi) {
  * to 4 lanes, where 32-bit values alone fill 8. The halves give the same numbers, bit for bit. */
 inline float rng32_next_float(Rng32 *r) { return rng32_float_if(r, true); }
 
-#define STEP_V3_NAME fog_step_v3
-#define STEP_RNG Rng
-#define STEP_RNG_FLOAT rng_next_float
-/* fog_step in scalar floats: the same estimator, written as selects where fog_step branches */
-inline void STEP_V3_NAME(const FogS *f, V3 *o, V3 *d, float t_seg, float *beta, V3 *L, STEP_RNG *rng) {
+/* fog_step in scalar floats: the same estimator, written as selects where fog_step branches; u_e, u,
+ * u_w, u_phi: its uniform numbers, in the order fog_step draws them (the caller draws them with its
+ * generator; not a float4, a vector type, which would stop the loop vectorizer) */
+inline void fog_step_v3(const FogS *f, V3 *o, V3 *d, float t_seg, float *beta, V3 *L, float u_e, float u,
+                        float u_w, float u_phi) {
     float sigma_s = f->sigma * f->albedo;
     EquiangularSegment s;
     bool seg_ok = lanes_equiangular_segment(*o, *d, t_seg, f->light, &s);
-    float u_e = STEP_RNG_FLOAT(rng);
     float t_e, pdf_e;
     bool eq = seg_ok && equiangular_segment_sample(&s, u_e, &t_e, &pdf_e);
     V3 wi;
@@ -189,45 +188,7 @@ inline void STEP_V3_NAME(const FogS *f, V3 *o, V3 *d, float t_seg, float *beta, 
     float tr = exp(-f->sigma * t_e);
     float c = eq ? *beta * tr * sigma_s * lanes_hg_eval(f->g, *d, wi) * heuristic(pdf_e, f->sigma * tr) / pdf_e : 0.0f;
     *L = v3_madd(*L, c, le);
-    float u = STEP_RNG_FLOAT(rng);
     float t = -log_pos(1.0f - u) / f->sigma;
-    float u_w = STEP_RNG_FLOAT(rng), u_phi = STEP_RNG_FLOAT(rng);    /* rng_next_float2's, not a float2 */
-    bool scattered = t < t_seg;
-    float b = scattered ? *beta * f->albedo : *beta;
-    V3 p = v3_madd(*o, scattered ? t : 0.0f, *d);
-    le = light_v3(f, p, &wi);
-    float pdf_eq = seg_ok ? equiangular_segment_pdf(&s, t) : 0.0f;
-    c = scattered ? b * lanes_hg_eval(f->g, *d, wi) * heuristic(f->sigma * (1.0f - u), pdf_eq) : 0.0f;
-    *L = v3_madd(*L, c, le);
-    V3 peak = v3_scale(*d, f->g >= 0.0f ? 1.0f : -1.0f);
-    V3 nd = lanes_direction_at(peak, phase_hg_sample_w(fabs(f->g), u_w), u_phi);
-    *d = v3_sel(scattered, nd, *d);
-    *o = v3_sel(scattered, p, *o);
-    *beta = b;
-}
-
-#undef STEP_V3_NAME
-#undef STEP_RNG
-#undef STEP_RNG_FLOAT
-#define STEP_V3_NAME fog_step_v3_rng32
-#define STEP_RNG Rng32
-#define STEP_RNG_FLOAT rng32_next_float
-/* fog_step in scalar floats: the same estimator, written as selects where fog_step branches */
-inline void STEP_V3_NAME(const FogS *f, V3 *o, V3 *d, float t_seg, float *beta, V3 *L, STEP_RNG *rng) {
-    float sigma_s = f->sigma * f->albedo;
-    EquiangularSegment s;
-    bool seg_ok = lanes_equiangular_segment(*o, *d, t_seg, f->light, &s);
-    float u_e = STEP_RNG_FLOAT(rng);
-    float t_e, pdf_e;
-    bool eq = seg_ok && equiangular_segment_sample(&s, u_e, &t_e, &pdf_e);
-    V3 wi;
-    V3 le = light_v3(f, v3_madd(*o, eq ? t_e : 0.0f, *d), &wi);
-    float tr = exp(-f->sigma * t_e);
-    float c = eq ? *beta * tr * sigma_s * lanes_hg_eval(f->g, *d, wi) * heuristic(pdf_e, f->sigma * tr) / pdf_e : 0.0f;
-    *L = v3_madd(*L, c, le);
-    float u = STEP_RNG_FLOAT(rng);
-    float t = -log_pos(1.0f - u) / f->sigma;
-    float u_w = STEP_RNG_FLOAT(rng), u_phi = STEP_RNG_FLOAT(rng);    /* rng_next_float2's, not a float2 */
     bool scattered = t < t_seg;
     float b = scattered ? *beta * f->albedo : *beta;
     V3 p = v3_madd(*o, scattered ? t : 0.0f, *d);
@@ -255,7 +216,9 @@ __kernel void step_scalar(STEP_ARGS) {
     Rng rng;
     rng.state = rng_state[i];
     rng.inc = rng_inc[i];
-    fog_step_v3(&f, &o, &d, state[F_T * n + i], &beta, &L, &rng);
+    float u_e = rng_next_float(&rng), u = rng_next_float(&rng);
+    float u_w = rng_next_float(&rng), u_phi = rng_next_float(&rng);
+    fog_step_v3(&f, &o, &d, state[F_T * n + i], &beta, &L, u_e, u, u_w, u_phi);
     state[F_OX * n + i] = o.x; state[(F_OX + 1) * n + i] = o.y; state[(F_OX + 2) * n + i] = o.z;
     state[F_DX * n + i] = d.x; state[(F_DX + 1) * n + i] = d.y; state[(F_DX + 2) * n + i] = d.z;
     state[F_L * n + i] = L.x; state[(F_L + 1) * n + i] = L.y; state[(F_L + 2) * n + i] = L.z;
@@ -277,7 +240,9 @@ __kernel void step_scalar32(STEP_ARGS) {
     __global uint *rs = (__global uint *)rng_state;
     __global const uint *ri = (__global const uint *)rng_inc;
     Rng32 rng = {rs[i], rs[n + i], ri[i], ri[n + i]};
-    fog_step_v3_rng32(&f, &o, &d, state[F_T * n + i], &beta, &L, &rng);
+    float u_e = rng32_next_float(&rng), u = rng32_next_float(&rng);
+    float u_w = rng32_next_float(&rng), u_phi = rng32_next_float(&rng);
+    fog_step_v3(&f, &o, &d, state[F_T * n + i], &beta, &L, u_e, u, u_w, u_phi);
     state[F_OX * n + i] = o.x; state[(F_OX + 1) * n + i] = o.y; state[(F_OX + 2) * n + i] = o.z;
     state[F_DX * n + i] = d.x; state[(F_DX + 1) * n + i] = d.y; state[(F_DX + 2) * n + i] = d.z;
     state[F_L * n + i] = L.x; state[(F_L + 1) * n + i] = L.y; state[(F_L + 2) * n + i] = L.z;
