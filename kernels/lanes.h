@@ -23,7 +23,6 @@
 typedef struct { float x, y, z; } V3;
 
 inline V3 v3(float x, float y, float z) { V3 v = {x, y, z}; return v; }
-inline V3 v3_add(V3 a, V3 b) { return v3(a.x + b.x, a.y + b.y, a.z + b.z); }
 inline V3 v3_sub(V3 a, V3 b) { return v3(a.x - b.x, a.y - b.y, a.z - b.z); }
 inline V3 v3_mul(V3 a, V3 b) { return v3(a.x * b.x, a.y * b.y, a.z * b.z); }
 inline V3 v3_scale(V3 a, float s) { return v3(a.x * s, a.y * s, a.z * s); }
@@ -31,7 +30,6 @@ inline V3 v3_madd(V3 o, float t, V3 d) { return v3(o.x + t * d.x, o.y + t * d.y,
 inline float v3_dot(V3 a, V3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
 inline float v3_max(V3 a) { return fmax(a.x, fmax(a.y, a.z)); }
 inline V3 v3_sel(bool c, V3 a, V3 b) { return v3(c ? a.x : b.x, c ? a.y : b.y, c ? a.z : b.z); }
-inline V3 v3_gload(const __global float *p) { return v3(p[0], p[1], p[2]); }
 
 /* ---- PCG32 (rng.h) on 32-bit halves of its state and increment: the same numbers, bit for bit */
 typedef struct { uint lo, hi, inc_lo, inc_hi; } Rng32;

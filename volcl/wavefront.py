@@ -41,7 +41,8 @@ EVENT_START = 17
 TABLE_STRIDE = 64
 TABLE_ROWS = 16
 T_LIGHT_POS, T_LIGHT_VALUE, T_SIGMA_T, T_ALBEDO, T_G, T_ISO, T_LANES, T_POINT = 0, 3, 6, 9, 12, 13, 14, 15
-# steps between looks at whether every path has finished (each look waits for the queue)
+# steps between looks at whether every path has finished (the host reads the flags as the next
+# batch runs)
 CHECK_EVERY = 8
 # paths in flight (at most STRIDE - 16): few enough for their state (about 220 bytes each) to stay in the
 # caches: on point_in_fog (AVX-512 host, PoCL) 4096 took 2.23 s, 2048 2.37 s, 16384 2.49 s,

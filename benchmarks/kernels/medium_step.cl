@@ -203,26 +203,32 @@ inline void fog_step_v3(const FogS *f, V3 *o, V3 *d, float t_seg, float *beta, V
     *beta = b;
 }
 
+/* fog_step_v3 on path i's state in its rows (the uniform numbers drawn by the caller's generator) */
+inline void step_v3_rows(__global float *state, int i, int n, const FogS *f, float u_e, float u, float u_w,
+                         float u_phi) {
+    V3 o = v3(state[(F_OX) * n + i], state[(F_OX + 1) * n + i], state[(F_OX + 2) * n + i]);
+    V3 d = v3(state[(F_DX) * n + i], state[(F_DX + 1) * n + i], state[(F_DX + 2) * n + i]);
+    V3 L = v3(state[(F_L) * n + i], state[(F_L + 1) * n + i], state[(F_L + 2) * n + i]);
+    float beta = state[F_BETA * n + i];
+    fog_step_v3(f, &o, &d, state[F_T * n + i], &beta, &L, u_e, u, u_w, u_phi);
+    state[F_OX * n + i] = o.x; state[(F_OX + 1) * n + i] = o.y; state[(F_OX + 2) * n + i] = o.z;
+    state[F_DX * n + i] = d.x; state[(F_DX + 1) * n + i] = d.y; state[(F_DX + 2) * n + i] = d.z;
+    state[F_L * n + i] = L.x; state[(F_L + 1) * n + i] = L.y; state[(F_L + 2) * n + i] = L.z;
+    state[F_BETA * n + i] = beta;
+}
+
 /* No bounds test: a store under a condition keeps LLVM from vectorizing the loop ("control flow
  * cannot be substituted for a select"), so the host launches n work-items exactly, as a wavefront
  * renderer would pad its path arrays to the work-group size. */
 __kernel void step_scalar(STEP_ARGS) {
     int i = get_global_id(0);
     FogS f = {sigma, albedo, g, {lx, ly, lz}, {ix, iy, iz}};
-    V3 o = v3(state[(F_OX) * n + i], state[(F_OX + 1) * n + i], state[(F_OX + 2) * n + i]);
-    V3 d = v3(state[(F_DX) * n + i], state[(F_DX + 1) * n + i], state[(F_DX + 2) * n + i]);
-    V3 L = v3(state[(F_L) * n + i], state[(F_L + 1) * n + i], state[(F_L + 2) * n + i]);
-    float beta = state[F_BETA * n + i];
     Rng rng;
     rng.state = rng_state[i];
     rng.inc = rng_inc[i];
     float u_e = rng_next_float(&rng), u = rng_next_float(&rng);
     float u_w = rng_next_float(&rng), u_phi = rng_next_float(&rng);
-    fog_step_v3(&f, &o, &d, state[F_T * n + i], &beta, &L, u_e, u, u_w, u_phi);
-    state[F_OX * n + i] = o.x; state[(F_OX + 1) * n + i] = o.y; state[(F_OX + 2) * n + i] = o.z;
-    state[F_DX * n + i] = d.x; state[(F_DX + 1) * n + i] = d.y; state[(F_DX + 2) * n + i] = d.z;
-    state[F_L * n + i] = L.x; state[(F_L + 1) * n + i] = L.y; state[(F_L + 2) * n + i] = L.z;
-    state[F_BETA * n + i] = beta;
+    step_v3_rows(state, i, n, &f, u_e, u, u_w, u_phi);
     rng_state[i] = rng.state;
 }
 
@@ -230,10 +236,6 @@ __kernel void step_scalar(STEP_ARGS) {
 __kernel void step_scalar32(STEP_ARGS) {
     int i = get_global_id(0);
     FogS f = {sigma, albedo, g, {lx, ly, lz}, {ix, iy, iz}};
-    V3 o = v3(state[(F_OX) * n + i], state[(F_OX + 1) * n + i], state[(F_OX + 2) * n + i]);
-    V3 d = v3(state[(F_DX) * n + i], state[(F_DX + 1) * n + i], state[(F_DX + 2) * n + i]);
-    V3 L = v3(state[(F_L) * n + i], state[(F_L + 1) * n + i], state[(F_L + 2) * n + i]);
-    float beta = state[F_BETA * n + i];
     /* the generator's state as rows of 32-bit halves (low halves of every path, then high halves),
      * so no 64-bit value is in the loop and no pair of adjacent halves for the SLP vectorizer to
      * pack into a <2 x i32>, which stops the loop vectorizer as a float3 does */
@@ -242,11 +244,7 @@ __kernel void step_scalar32(STEP_ARGS) {
     Rng32 rng = {rs[i], rs[n + i], ri[i], ri[n + i]};
     float u_e = rng32_next_float(&rng), u = rng32_next_float(&rng);
     float u_w = rng32_next_float(&rng), u_phi = rng32_next_float(&rng);
-    fog_step_v3(&f, &o, &d, state[F_T * n + i], &beta, &L, u_e, u, u_w, u_phi);
-    state[F_OX * n + i] = o.x; state[(F_OX + 1) * n + i] = o.y; state[(F_OX + 2) * n + i] = o.z;
-    state[F_DX * n + i] = d.x; state[(F_DX + 1) * n + i] = d.y; state[(F_DX + 2) * n + i] = d.z;
-    state[F_L * n + i] = L.x; state[(F_L + 1) * n + i] = L.y; state[(F_L + 2) * n + i] = L.z;
-    state[F_BETA * n + i] = beta;
+    step_v3_rows(state, i, n, &f, u_e, u, u_w, u_phi);
     rs[i] = rng.lo;
     rs[n + i] = rng.hi;
 }
