@@ -14,8 +14,15 @@
  *  - 32-bit values only: the vectorizer sizes its vectors by the widest type in the loop, and one
  *    64-bit value holds a 256-bit register to 4 lanes. The PCG32 generator of rng.h keeps its
  *    64-bit state as two 32-bit halves here (Rng32), giving the same numbers bit for bit.
- *  - no switch, no inner loop, no call left out of line, no store under a condition: every path's
- *    state is written back whether it changed or not, and conditions become selects.
+ *  - no switch, no inner loop, no call left out of line, no store or load under a condition: every
+ *    path's state is written back whether it changed or not, and conditions become selects (a
+ *    table read only where a select takes it stayed a branch). A loop with a constant trip count
+ *    is unrolled whole (lanes_triangles.h).
+ *  - nothing the SLP vectorizer can pack: PoCL runs it on the kernel before it forms the work-item
+ *    loop, and a <2 x float> it leaves stops the loop vectorizer. It packs neighbouring loads, and
+ *    any two isomorphic computations side by side that it finds worth it: two shadow rays' tests
+ *    and transmittances, their conditions' compares, two fabs. One of the two is made to depend on
+ *    the other (lanes_after), or written another way.
  */
 #ifndef VOLCL_LANES_H
 #define VOLCL_LANES_H
@@ -23,6 +30,7 @@
 typedef struct { float x, y, z; } V3;
 
 inline V3 v3(float x, float y, float z) { V3 v = {x, y, z}; return v; }
+inline V3 v3_add(V3 a, V3 b) { return v3(a.x + b.x, a.y + b.y, a.z + b.z); }
 inline V3 v3_sub(V3 a, V3 b) { return v3(a.x - b.x, a.y - b.y, a.z - b.z); }
 inline V3 v3_mul(V3 a, V3 b) { return v3(a.x * b.x, a.y * b.y, a.z * b.z); }
 inline V3 v3_scale(V3 a, float s) { return v3(a.x * s, a.y * s, a.z * s); }
@@ -30,6 +38,16 @@ inline V3 v3_madd(V3 o, float t, V3 d) { return v3(o.x + t * d.x, o.y + t * d.y,
 inline float v3_dot(V3 a, V3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
 inline float v3_max(V3 a) { return fmax(a.x, fmax(a.y, a.z)); }
 inline V3 v3_sel(bool c, V3 a, V3 b) { return v3(c ? a.x : b.x, c ? a.y : b.y, c ? a.z : b.z); }
+
+/* v, made to depend on `dep` (exactly v, whatever dep is): two isomorphic computations side by side
+ * (two shadow rays' tests and transmittances) were packed into <2 x float> vectors by the SLP
+ * vectorizer, which stops the loop vectorizer; one that needs the other's result cannot be packed
+ * with it */
+inline float lanes_after(float v, float dep) { return v + 0.0f * fmax(fmin(dep, 0.0f), -1.0f); }
+inline V3 lanes_after3(V3 v, float dep) {
+    float z = 0.0f * fmax(fmin(dep, 0.0f), -1.0f);
+    return v3(v.x + z, v.y + z, v.z + z);
+}
 
 /* ---- PCG32 (rng.h) on 32-bit halves of its state and increment: the same numbers, bit for bit */
 typedef struct { uint lo, hi, inc_lo, inc_hi; } Rng32;

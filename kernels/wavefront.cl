@@ -14,11 +14,15 @@
  *     path_medium_event itself;
  *   - the surface event and Russian roulette (integrator.h), as integrator_radiance's loop does;
  *   - at the path's end, its radiance into `results`, and the next job;
- *   - the next ray's closest hit, for the lanes stage to step through its medium.
+ *   - the next ray's closest hit, for the lanes stage to step through its medium (for a scene the
+ *     lanes stage tests whole, VOLCL_WF_TINY, the lanes stage finds it, and traces the shadow rays).
  * The random numbers are drawn in integrator_radiance's order, the lanes stage's in between, so a
  * sample follows the same path as in the megakernel up to the roundings of vector arithmetic. */
 #include "renderer.h"
 #include "wavefront_state.h"
+#ifndef VOLCL_WF_TINY
+#define VOLCL_WF_TINY 0         /* a scene the lanes stage traces itself (lanes_triangles.h), or 0 */
+#endif
 
 #define FROW(r) fs[WF_AT(r)]
 #define IROW(r) is[WF_AT(r)]
@@ -80,6 +84,9 @@ inline void wf_store(__global float *fs, __global int *is, int i, const PathStat
     IROW(WF_RNG + 1) = (int)(uint)(rng->state >> 32);
     IROW(WF_RNG + 2) = (int)(uint)rng->inc;
     IROW(WF_RNG + 3) = (int)(uint)(rng->inc >> 32);
+#if VOLCL_WF_TINY           /* the lanes stage traces the ray */
+    (void)h;
+#else
     FROW(WF_HIT_T) = h->t;
     FROW(WF_HIT_B1) = h->b1;
     FROW(WF_HIT_B2) = h->b2;
@@ -88,6 +95,7 @@ inline void wf_store(__global float *fs, __global int *is, int i, const PathStat
     IROW(WF_HIT_INST) = h->inst;
 #else
     IROW(WF_HIT_INST) = -1;
+#endif
 #endif
 }
 
@@ -175,7 +183,11 @@ VOLCL_KERNEL void wavefront_scalar(VOLCL_SCENE_ARGS,
         steps = 0;
         cut = 0u;
     }
+#if VOLCL_WF_TINY
+    hit = false;        /* the lanes stage traces the ray */
+#else
     hit = bvh_trace(&sc, ps.o, ps.d, ps.t_max, TRACE_CLOSEST, &h);
+#endif
     wf_store(fs, is, i, &ps, &rng, &h, hit);
     IROW(WF_EVENT) = WF_EV_MEDIUM;
     IROW(WF_JOB) = job;

@@ -10,6 +10,10 @@
  * nothing). Paths in no medium go on to their surface; paths in other media keep WF_EV_MEDIUM and
  * the scalar stage runs path_medium_event for them.
  *
+ * A scene small enough to test whole (VOLCL_WF_TINY, lanes_triangles.h) needs no BVH: here the stage
+ * also finds the closest hit of the ray the scalar stage left, and traces the two shadow rays, with
+ * the BVH's bits; the scalar stage then neither traces nor reads shadow rows.
+ *
  * Built as its own program, every function inlined (the pragma below marks every function declared
  * up to the kernel always_inline): LLVM's loop vectorizer (PoCL) stops at a call left out of line,
  * and the renderer's helpers used here are plain `inline`. */
@@ -17,6 +21,12 @@
 #include "renderer.h"
 #include "lanes.h"
 #include "wavefront_state.h"
+#ifndef VOLCL_WF_TINY
+#define VOLCL_WF_TINY 0         /* triangle lanes of a scene tested whole (lanes_triangles.h), or 0 */
+#endif
+#if VOLCL_WF_TINY
+#include "lanes_triangles.h"
+#endif
 
 #define FROW(r) fs[WF_AT(r)]
 #define IROW(r) is[WF_AT(r)]
@@ -74,9 +84,19 @@ __kernel void wavefront_medium(__global float *fs, __global int *is, __global co
     bool pending = event == WF_EV_MEDIUM;
     int mk = max(mi, 0);
     bool run = pending & (mi >= 0) & (TROW(WF_T_LANES, mk) > 0.0f);
-    bool hit = (flags & WF_FLAG_HIT) != 0u, do_nee = (flags & WF_FLAG_DO_NEE) != 0u;
+    bool do_nee = (flags & WF_FLAG_DO_NEE) != 0u;
     V3 o = frow3(fs, WF_O, i), d = frow3(fs, WF_D, i), beta = frow3(fs, WF_BETA, i);
     float t_back = FROW(WF_T_BACK);
+#if VOLCL_WF_TINY
+    /* the closest hit of the ray the scalar stage left (a scene tested whole) */
+    float hit_t, hit_b1, hit_b2;
+    int hit_prim;
+    bool hit = lanes_closest_hit(table, o, d, FROW(WF_T_MAX), &hit_t, &hit_b1, &hit_b2, &hit_prim);
+    flags = hit ? flags | WF_FLAG_HIT : flags & ~WF_FLAG_HIT;
+#else
+    bool hit = (flags & WF_FLAG_HIT) != 0u;
+    float hit_t = FROW(WF_HIT_T);
+#endif
     Rng32 rng = {(uint)IROW(WF_RNG), (uint)IROW(WF_RNG + 1), (uint)IROW(WF_RNG + 2), (uint)IROW(WF_RNG + 3)};
     V3 sigma_t = trow3(table, WF_T_SIGMA_T, mk), albedo = trow3(table, WF_T_ALBEDO, mk);
     float g = TROW(WF_T_G, mk);
@@ -85,7 +105,7 @@ __kernel void wavefront_medium(__global float *fs, __global int *is, __global co
 
     /* the segment starts at the surface the ray left, t_back behind the offset origin */
     V3 seg_o = v3_madd(o, -t_back, d);
-    float seg_t = (hit ? FROW(WF_HIT_T) : FROW(WF_T_MAX)) + t_back;
+    float seg_t = (hit ? hit_t : FROW(WF_T_MAX)) + t_back;
 
 #if VOLCL_HAS_EQUIANGULAR
     /* equiangular_begin: which techniques estimate the point lights' light on this segment */
@@ -203,8 +223,12 @@ __kernel void wavefront_medium(__global float *fs, __global int *is, __global co
                : (!scattered ? PATH_SURFACE : (ended ? PATH_END : PATH_CONTINUE))));
     IROW(WF_EVENT) = next;
     uint keep = flags & ~(WF_FLAG_SHADOW0 | WF_FLAG_SHADOW1 | WF_FLAG_NEE | (cont ? WF_FLAG_SPECULAR : 0u));
-    IROW(WF_FLAGS) = (int)(keep | ((run & shadow0) ? WF_FLAG_SHADOW0 : 0u) | (shadow1 ? WF_FLAG_SHADOW1 : 0u)
-                           | (nee_later ? WF_FLAG_NEE : 0u));
+#if VOLCL_WF_TINY
+    uint traced = 0u;       /* the shadow rays are traced below */
+#else
+    uint traced = ((run & shadow0) ? WF_FLAG_SHADOW0 : 0u) | (shadow1 ? WF_FLAG_SHADOW1 : 0u);
+#endif
+    IROW(WF_FLAGS) = (int)(keep | traced | (nee_later ? WF_FLAG_NEE : 0u));
     IROW(WF_DEPTH) = cont ? depth + 1 : depth;
     IROW(WF_RNG) = (int)rng.lo;
     IROW(WF_RNG + 1) = (int)rng.hi;
@@ -215,10 +239,35 @@ __kernel void wavefront_medium(__global float *fs, __global int *is, __global co
     FROW(WF_T_BACK) = cont ? 0.0f : t_back;
     FROW(WF_PREV_PDF) = cont ? pdf_dir : FROW(WF_PREV_PDF);
     frow3_put(fs, WF_PREV_P, i, v3_sel(cont, p, frow3(fs, WF_PREV_P, i)));
+#if VOLCL_WF_TINY
+    /* the shadow rays here too, as wf_shadow (wavefront.cl) traces them: the segment's
+     * transmittance in the path's medium unless a triangle blocks it */
+    FROW(WF_HIT_T) = hit_t;
+    FROW(WF_HIT_B1) = hit_b1;
+    FROW(WF_HIT_B2) = hit_b2;
+    IROW(WF_HIT_PRIM) = hit_prim;
+    IROW(WF_HIT_INST) = -1;
+    V3 L = frow3(fs, WF_L, i);
+    /* a ray that is not to be traced gets an empty segment (reach -1), and the second ray's numbers
+     * wait for the first's (lanes_after): the two rays' conditions and tests side by side were
+     * packed into <2 x ...> vectors */
+    float t0 = dist * 0.9999f;
+    float reach0 = lanes_reach(table, x, wi, (run & shadow0) ? t0 : -1.0f);
+    V3 tr0 = lanes_transmittance(sigma_t, t0);
+    float t1 = lanes_after(dist_l * 0.9999f, reach0);
+    float reach1 = lanes_reach(table, lanes_after3(p, reach0), lanes_after3(wl, reach0), shadow1 ? t1 : -1.0f);
+    V3 tr1 = lanes_transmittance(sigma_t, t1);
+    bool pass0 = (reach0 >= 0.0f) & (v3_max(tr0) > 0.0f);
+    bool pass1 = (reach1 >= 0.0f) & (v3_max(tr1) > 0.0f);
+    L = v3_sel(pass0, v3_add(L, v3_mul(c_e, tr0)), L);
+    L = v3_sel(pass1, v3_add(L, v3_mul(c_l, tr1)), L);
+    frow3_put(fs, WF_L, i, L);
+#else
     frow3_put(fs, WF_SHADOW(0) + WF_SHADOW_O, i, x);
     frow3_put(fs, WF_SHADOW(0) + WF_SHADOW_D, i, wi);
     FROW(WF_SHADOW(0) + WF_SHADOW_T) = dist * 0.9999f;
     frow3_put(fs, WF_SHADOW(0) + WF_SHADOW_C, i, c_e);
+#endif
     frow3_put(fs, WF_SHADOW(1) + WF_SHADOW_O, i, p);
     frow3_put(fs, WF_SHADOW(1) + WF_SHADOW_D, i, v3_sel(nee_later, d, wl));
     FROW(WF_SHADOW(1) + WF_SHADOW_T) = dist_l * 0.9999f;

@@ -29,6 +29,10 @@
 #define WF_T_LANES 14           /* 1 where the lanes stage handles the medium (homogeneous), else 0 */
 #define WF_T_POINT 15           /* 1 for a point light, which the lanes stage samples itself, else 0 */
 #define WF_TABLE_ROWS 16
+/* then a tiny scene's triangle lanes (lanes_triangles.h): coordinate c (p0 xyz, p1 xyz, p2 xyz, then
+ * the primitive code's int bits) of lane k, every number a cache line from the next (neighbouring
+ * words were packed into vectors again) */
+#define WF_TRI_AT(c, k) (WF_TABLE_ROWS * WF_TABLE_STRIDE + ((c) * VOLCL_WF_TINY + (k)) * 16)
 
 /* float rows */
 #define WF_L 0              /* 3 rows each: x, y, z */

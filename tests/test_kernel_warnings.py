@@ -3,7 +3,7 @@ clang's static analyzer, for the program with every feature compiled in; and eve
 (no feature, each feature alone, all features but one) under the same warnings less the
 unused-parameter and unused-variable family (code a specialization compiles out leaves its
 arguments unused, by design). The wavefront renderer's entry points (wavefront.cl, wavefront_lanes.cl)
-are checked with every feature compiled in. Skipped, with the reason, where clang is absent (`./quickstart test`
+are checked with every feature compiled in, with and without the lanes stage's whole-scene tests. Skipped, with the reason, where clang is absent (`./quickstart test`
 installs it)."""
 import shutil
 import subprocess
@@ -33,11 +33,16 @@ def _specializations():
     return out
 
 
-ENTRY_POINTS = ["render.cl", "wavefront.cl", "wavefront_lanes.cl"]
+# (file, extra options): the wavefront stages also as built for a scene tested whole (volcl.wavefront:
+# 6 triangles in packets of 4 and 2)
+TINY = ["-DVOLCL_WF_TINY=6", "-DVOLCL_WF_TINY_ENDS=40"]
+ENTRY_POINTS = ["render.cl", "wavefront.cl", "wavefront_lanes.cl", "wavefront.cl tiny", "wavefront_lanes.cl tiny"]
 
 
 def _compile(args, features, entry="render.cl"):
-    cmd = [CLANG] + FRONT_END + args + build_options(features) + [str(kernels_dir() / entry)]
+    name, _, variant = entry.partition(" ")
+    extra = TINY if variant == "tiny" else []
+    cmd = [CLANG] + FRONT_END + args + build_options(features, tuple(extra)) + [str(kernels_dir() / name)]
     return subprocess.run(cmd, capture_output=True, text=True)
 
 

@@ -11,6 +11,7 @@ import volcl
 from imagestats import assert_same_image
 from volcl.errors import VolclError
 from volcl.estimator import Estimator
+from volcl import wavefront
 from volcl.renderer import Renderer
 
 pytestmark = pytest.mark.every_implementation
@@ -108,3 +109,58 @@ def test_says_why_not(device):
         Renderer(cbox, device=device, engine="wavefront")
     with pytest.raises(VolclError, match="engine"):
         Renderer(cbox, device=device, engine="lanes")
+
+
+def _tree_route(r):
+    """The renderer r's wavefront with the scalar stage's BVH queries instead of the lanes' whole-scene
+    tests (volcl.wavefront.tiny_lanes)."""
+    r.wavefront = wavefront.Wavefront(r.device, r.features, r.packed, r.group_items, tiny=False)
+    return r
+
+
+@pytest.mark.parametrize("name", ["point_in_fog", "chromatic"])
+def test_whole_scene_tests_match_the_tree(device, name):
+    """A scene small enough to test whole: the lanes stage's closest hits and shadow rays
+    (kernels/lanes_triangles.h) give the BVH's bits, so the image is the one the scalar stage's
+    queries give, bit for bit, for every estimator choice of the lanes stage."""
+    if device.kind != "cpu":
+        pytest.skip("the wavefront renderer is for CPU devices")
+    scene = _scene(name)
+    for what, estimator in ESTIMATORS.items():
+        tiny = Renderer(scene, device=device, estimator=estimator, seed=5, engine="wavefront")
+        assert tiny.wavefront.tiny > 0
+        tree = _tree_route(Renderer(scene, device=device, estimator=estimator, seed=5, engine="wavefront"))
+        a, b = tiny.render(4), tree.render(4)
+        assert np.array_equal(a.image, b.image), f"{name}, {what}: {np.mean(a.image != b.image):.2%} of channels differ"
+
+
+def test_tree_route_same_paths_as_megakernel(device):
+    """The route for scenes too big to test whole (the scalar stage's BVH queries) still renders the
+    megakernel's paths."""
+    if device.kind != "cpu":
+        pytest.skip("the wavefront renderer is for CPU devices")
+    scene = _scene("point_in_fog")
+    mk = Renderer(scene, device=device, seed=3, engine="megakernel").render(8)
+    wf = _tree_route(Renderer(scene, device=device, seed=3, engine="wavefront")).render(8)
+    rel = np.abs(wf.image - mk.image) / np.maximum(np.abs(mk.image), 1e-6)
+    assert np.mean(rel > 1e-3) < 0.01
+
+
+def _with_shape(shape_xml):
+    text = CHROMATIC.replace("</scene>", shape_xml + "</scene>")
+    return volcl.load_string(text)
+
+
+@pytest.mark.parametrize("shape, expect", [
+    ("", 12),           # the box: 12 triangles, three packets
+    ('<shape type="sphere"><float name="radius" value="0.2"/><bsdf type="diffuse"/><ref name="exterior" id="haze"/></shape>', 0),
+    ('<shape type="rectangle"><bsdf type="null"/><ref name="exterior" id="haze"/></shape>', 0),
+    ('<shape type="rectangle"><bsdf type="thindielectric"/><ref name="exterior" id="haze"/></shape>', 0),
+    # a dielectric blocks shadow rays in the megakernel too (refraction is specular)
+    ('<shape type="rectangle"><bsdf type="dielectric"/><ref name="exterior" id="haze"/></shape>', 14),
+])
+def test_which_scenes_are_tested_whole(device, shape, expect):
+    """Only opaque triangles, at most wavefront.TINY_LANES packet lanes: an analytic sphere, a null
+    or a thin glass surface (which shadow rays cross) send the scene to the scalar stage's queries."""
+    r = Renderer(_with_shape(shape), device=device, engine="megakernel")
+    assert wavefront.tiny_lanes(r.packed, r.features)[0] == expect

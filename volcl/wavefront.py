@@ -15,7 +15,10 @@ roundings of the lanes stage's arithmetic (vector exp, log and sqrt), and where 
 path another way.
 
 It renders scenes whose media are all homogeneous, with the path integrator, on CPU devices; the
-lanes stage samples point lights itself and leaves NEE towards other lights to the scalar stage. A
+lanes stage samples point lights itself and leaves NEE towards other lights to the scalar stage.
+A scene of a few opaque triangles (tiny_lanes) needs no BVH: the lanes stage tests every triangle
+for the closest hit and the medium event's two shadow rays (kernels/lanes_triangles.h), with the
+BVH's bits, so those queries run in the lanes too. A
 Renderer takes it by itself ("auto") where it pays (pays()), or when asked (engine="wavefront").
 """
 from __future__ import annotations
@@ -41,6 +44,10 @@ EVENT_START = 17
 TABLE_STRIDE = 64
 TABLE_ROWS = 16
 T_LIGHT_POS, T_LIGHT_VALUE, T_SIGMA_T, T_ALBEDO, T_G, T_ISO, T_LANES, T_POINT = 0, 3, 6, 9, 12, 13, 14, 15
+TRI_SPACING = 16        # words between a tiny scene's triangle numbers (wavefront_state.h WF_TRI_AT)
+# the most triangles of a scene the lanes stage traces itself, testing every one for every ray
+# (kernels/lanes_triangles.h)
+TINY_LANES = 16
 # steps between looks at whether every path has finished (the host reads the flags as the next
 # batch runs)
 CHECK_EVERY = 8
@@ -84,9 +91,31 @@ def pays(packed, params) -> bool:
             and bool(np.all(lights["type"] == layout.LIGHT_TYPES["point"])))
 
 
-def lanes_table(packed) -> np.ndarray:
-    """The lights' and media's parameters the lanes stage reads (wavefront_state.h's table)."""
+def tiny_lanes(packed, features: dict) -> tuple[int, int]:
+    """The triangles the lanes stage tests for every ray when the scene is small enough to trace
+    whole, as (how many, a mask of those that end a leaf packet): at most TINY_LANES triangles, every
+    primitive an opaque triangle (so a shadow ray is blocked by any hit); else (0, 0)."""
+    leaves = packed.arrays["leaves"]
+    used = np.any(leaves["v"] != 0, axis=1)         # unused lanes hold the zero triangle
+    count = int(used.sum())
+    if (features.get("INSTANCES") or count == 0 or count > TINY_LANES or np.any(leaves["prim"] < 0)
+            or not np.all(leaves["opaque"][used] == -1)):
+        return 0, 0
+    # the packets' lanes are filled first to last: a packet's last used lane ends it
+    ends = np.cumsum(used.sum(axis=1))[used.any(axis=1)] - 1
+    return count, int(np.sum(1 << ends))
+
+
+def lanes_table(packed, tiny: int = 0) -> np.ndarray:
+    """The lights' and media's parameters the lanes stage reads (wavefront_state.h's table), and
+    with `tiny` the scene's triangles in packet order (lanes_triangles.h)."""
     t = np.zeros((TABLE_ROWS, TABLE_STRIDE), np.float32)
+    tri = np.zeros((10, tiny, TRI_SPACING), np.float32)
+    if tiny:
+        leaves = packed.arrays["leaves"]
+        used = np.any(leaves["v"] != 0, axis=1)
+        tri[:9, :, 0] = leaves["v"].transpose(1, 0, 2)[:, used]
+        tri[9, :, 0] = leaves["prim"][used].astype(np.int32).view(np.float32)
     lights, media = packed.arrays["lights"], packed.arrays["media"]
     t[T_LIGHT_POS:T_LIGHT_POS + 3, :len(lights)] = lights["position"].T
     t[T_LIGHT_VALUE:T_LIGHT_VALUE + 3, :len(lights)] = lights["value"].T
@@ -97,7 +126,7 @@ def lanes_table(packed) -> np.ndarray:
     t[T_ISO, :len(media)] = media["phase"] == layout.PHASE_TYPES["isotropic"]
     t[T_LANES, :len(media)] = (media["type"] == layout.MEDIUM_TYPES["homogeneous"]) & (t[T_ISO, :len(media)] + hg > 0)
     t[T_POINT, :len(lights)] = lights["type"] == layout.LIGHT_TYPES["point"]
-    return t
+    return np.concatenate([t.reshape(-1), tri.reshape(-1)])
 
 
 class _DeviceState:
@@ -130,16 +159,18 @@ def device_state(device) -> _DeviceState:
 class Wavefront:
     """The stage kernels of one Renderer's feature set, and the loop that runs them."""
 
-    def __init__(self, device, features: dict, packed, group_items: int, paths: int = PATHS):
+    def __init__(self, device, features: dict, packed, group_items: int, paths: int = PATHS, tiny: bool = True):
         self.device = device
-        program = device.program(features, SCALAR_FILE)
+        self.tiny, ends = tiny_lanes(packed, features) if tiny else (0, 0)
+        extra = (f"-DVOLCL_WF_TINY={self.tiny}", f"-DVOLCL_WF_TINY_ENDS={ends}") if self.tiny else ()
+        program = device.program(features, SCALAR_FILE, extra)
         self.scalar = cl.Kernel(program, "wavefront_scalar")
         self.add = cl.Kernel(program, "wavefront_add")
-        self.lanes = cl.Kernel(device.program(features, LANES_FILE), "wavefront_medium")
+        self.lanes = cl.Kernel(device.program(features, LANES_FILE, extra), "wavefront_medium")
         self.group_items = group_items
         self.paths = -(-min(paths, STRIDE - 16) // group_items) * group_items
         self.table = cl.Buffer(device.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
-                               hostbuf=lanes_table(packed))
+                               hostbuf=lanes_table(packed, self.tiny))
         self.results = None
         self.steps = 0          # stage pairs launched so far (benchmarks read it)
 
