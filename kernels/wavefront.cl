@@ -151,7 +151,9 @@ VOLCL_KERNEL void wavefront_scalar(VOLCL_SCENE_ARGS,
     (void)tile_pixels;                  /* render_pass's arguments all; wavefront_add places the sums */
     if (!((uint)IROW(WF_FLAGS) & WF_FLAG_ALIVE)) return;
     SceneData sc = VOLCL_SCENE_DATA;
-    int event = IROW(WF_EVENT), job = IROW(WF_JOB), steps = IROW(WF_STEPS);
+    int event = IROW(WF_EVENT);
+    if (event == WF_EV_NEXT) return;    /* the lanes stage took the step (VOLCL_WF_TINY) */
+    int job = IROW(WF_JOB), steps = IROW(WF_STEPS);
     uint cut = (uint)IROW(WF_CUTOFFS);
     PathState ps;
     Rng rng;

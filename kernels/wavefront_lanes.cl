@@ -81,7 +81,7 @@ __kernel void wavefront_medium(__global float *fs, __global int *is, __global co
     int i = (int)get_global_id(0);
     int event = IROW(WF_EVENT), mi = IROW(WF_MEDIUM), depth = IROW(WF_DEPTH);
     uint flags = (uint)IROW(WF_FLAGS);
-    bool pending = event == WF_EV_MEDIUM;
+    bool pending = (event == WF_EV_MEDIUM) | (event == WF_EV_NEXT);
     int mk = max(mi, 0);
     bool run = pending & (mi >= 0) & (TROW(WF_T_LANES, mk) > 0.0f);
     bool do_nee = (flags & WF_FLAG_DO_NEE) != 0u;
@@ -219,8 +219,20 @@ __kernel void wavefront_medium(__global float *fs, __global int *is, __global co
     float pdf_dir = iso ? VOLCL_INV_4PI : pdf_hg;
 
     /* write back: every field, changed or not */
-    int next = !pending ? event : (mi < 0 ? PATH_SURFACE : (!run ? event
+    int next = !pending ? event : (mi < 0 ? PATH_SURFACE : (!run ? WF_EV_MEDIUM
                : (!scattered ? PATH_SURFACE : (ended ? PATH_END : PATH_CONTINUE))));
+#if VOLCL_WF_TINY
+    /* path_roulette and the step count, as the scalar stage's loop takes them after a medium event:
+     * a path that scattered needs nothing of the scalar stage then (the stage traces it next) */
+    bool rr = cont & (depth + 1 >= rp->rr_depth);
+    float u_rr = rng32_float_if(&rng, rr);
+    float q = fmin(v3_max(beta) * FROW(WF_ETA_SCALE), 0.95f);
+    bool killed = rr & (u_rr >= q);
+    beta = v3_sel(rr & !killed, lanes_div(beta, q), beta);
+    int steps = IROW(WF_STEPS) + (cont ? 1 : 0);
+    next = cont ? ((killed | (steps >= VOLCL_MAX_STEPS)) ? PATH_END : WF_EV_NEXT) : next;
+    IROW(WF_STEPS) = steps;
+#endif
     IROW(WF_EVENT) = next;
     uint keep = flags & ~(WF_FLAG_SHADOW0 | WF_FLAG_SHADOW1 | WF_FLAG_NEE | (cont ? WF_FLAG_SPECULAR : 0u));
 #if VOLCL_WF_TINY

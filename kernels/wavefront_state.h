@@ -84,5 +84,7 @@
 /* WF_EVENT: what the next stage does with the path, beyond integrator.h's PATH_* codes */
 #define WF_EV_MEDIUM 16     /* the ray is traced: its medium segment is next */
 #define WF_EV_START 17      /* a new sample starts */
+#define WF_EV_NEXT 18       /* (VOLCL_WF_TINY) the lanes stage took the whole step, roulette included:
+                             * the scalar stage leaves the path alone, the lanes stage traces it next */
 
 #endif
