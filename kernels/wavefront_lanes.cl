@@ -224,13 +224,16 @@ __kernel void wavefront_medium(__global float *fs, __global int *is, __global co
 #if VOLCL_WF_TINY
     /* path_roulette and the step count, as the scalar stage's loop takes them after a medium event:
      * a path that scattered needs nothing of the scalar stage then (the stage traces it next) */
-    bool rr = cont & (depth + 1 >= rp->rr_depth);
+    /* (not where NEE towards a light other than a point light is left to the scalar stage: it
+     * comes before the roulette, with the throughput before it) */
+    bool going = cont & !nee_later;
+    bool rr = going & (depth + 1 >= rp->rr_depth);
     float u_rr = rng32_float_if(&rng, rr);
     float q = fmin(v3_max(beta) * FROW(WF_ETA_SCALE), 0.95f);
     bool killed = rr & (u_rr >= q);
     beta = v3_sel(rr & !killed, lanes_div(beta, q), beta);
-    int steps = IROW(WF_STEPS) + (cont ? 1 : 0);
-    next = cont ? ((killed | (steps >= VOLCL_MAX_STEPS)) ? PATH_END : WF_EV_NEXT) : next;
+    int steps = IROW(WF_STEPS) + (going ? 1 : 0);
+    next = going ? ((killed | (steps >= VOLCL_MAX_STEPS)) ? PATH_END : WF_EV_NEXT) : next;
     IROW(WF_STEPS) = steps;
 #endif
     IROW(WF_EVENT) = next;
