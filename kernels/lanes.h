@@ -44,10 +44,7 @@ inline V3 v3_sel(bool c, V3 a, V3 b) { return v3(c ? a.x : b.x, c ? a.y : b.y, c
  * vectorizer, which stops the loop vectorizer; one that needs the other's result cannot be packed
  * with it */
 inline float lanes_after(float v, float dep) { return v + 0.0f * fmax(fmin(dep, 0.0f), -1.0f); }
-inline V3 lanes_after3(V3 v, float dep) {
-    float z = 0.0f * fmax(fmin(dep, 0.0f), -1.0f);
-    return v3(v.x + z, v.y + z, v.z + z);
-}
+inline V3 lanes_after3(V3 v, float dep) { return v3(lanes_after(v.x, dep), lanes_after(v.y, dep), lanes_after(v.z, dep)); }
 
 /* ---- PCG32 (rng.h) on 32-bit halves of its state and increment: the same numbers, bit for bit */
 typedef struct { uint lo, hi, inc_lo, inc_hi; } Rng32;

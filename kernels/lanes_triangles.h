@@ -51,7 +51,7 @@ inline LanesShear lanes_shear(V3 o, V3 d) {
     return s;
 }
 
-/* The watertight test of triangle k of the table (vertex coordinate c at row WF_T_TRI + c) for
+/* The watertight test of triangle k of the table (vertex coordinate c at WF_TRI_AT(c, k)) for
  * hits in (0, tmax): whether it is hit, and the distance and barycentrics scaled by det. */
 inline bool lanes_triangle_hit(__global const float *table, int k, const LanesShear *s, float tmax,
                                float *t_scaled, float *det, float *e1, float *e2) {

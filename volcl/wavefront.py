@@ -18,8 +18,8 @@ It renders scenes whose media are all homogeneous, with the path integrator, on 
 lanes stage samples point lights itself and leaves NEE towards other lights to the scalar stage.
 A scene of a few opaque triangles (tiny_lanes) needs no BVH: the lanes stage tests every triangle
 for the closest hit and the medium event's two shadow rays (kernels/lanes_triangles.h), with the
-BVH's bits, so those queries run in the lanes too. A
-Renderer takes it by itself ("auto") where it pays (pays()), or when asked (engine="wavefront").
+BVH's bits, so those queries run in the lanes too, and it takes the roulette after a scatter.
+A Renderer takes it by itself ("auto") where it pays (pays()), or when asked (engine="wavefront").
 """
 from __future__ import annotations
 
@@ -92,12 +92,18 @@ def pays(packed, params) -> bool:
             and bool(np.all(lights["type"] == layout.LIGHT_TYPES["point"])))
 
 
+def _used_lanes(leaves) -> np.ndarray:
+    """(packets, lanes) mask of the leaf packets' lanes that hold a triangle (unused lanes hold the
+    zero triangle)."""
+    return np.any(leaves["v"] != 0, axis=1)
+
+
 def tiny_lanes(packed, features: dict) -> tuple[int, int]:
     """The triangles the lanes stage tests for every ray when the scene is small enough to trace
     whole, as (how many, a mask of those that end a leaf packet): at most TINY_LANES triangles, every
     primitive an opaque triangle (so a shadow ray is blocked by any hit); else (0, 0)."""
     leaves = packed.arrays["leaves"]
-    used = np.any(leaves["v"] != 0, axis=1)         # unused lanes hold the zero triangle
+    used = _used_lanes(leaves)
     count = int(used.sum())
     if (features.get("INSTANCES") or count == 0 or count > TINY_LANES or np.any(leaves["prim"] < 0)
             or not np.all(leaves["opaque"][used] == -1)):
@@ -114,7 +120,7 @@ def lanes_table(packed, tiny: int = 0) -> np.ndarray:
     tri = np.zeros((10, tiny, TRI_SPACING), np.float32)
     if tiny:
         leaves = packed.arrays["leaves"]
-        used = np.any(leaves["v"] != 0, axis=1)
+        used = _used_lanes(leaves)
         tri[:9, :, 0] = leaves["v"].transpose(1, 0, 2)[:, used]
         tri[9, :, 0] = leaves["prim"][used].astype(np.int32).view(np.float32)
     lights, media = packed.arrays["lights"], packed.arrays["media"]
