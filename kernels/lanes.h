@@ -21,8 +21,11 @@
  *  - nothing the SLP vectorizer can pack: PoCL runs it on the kernel before it forms the work-item
  *    loop, and a <2 x float> it leaves stops the loop vectorizer. It packs neighbouring loads, and
  *    any two isomorphic computations side by side that it finds worth it: two shadow rays' tests
- *    and transmittances, their conditions' compares, two fabs. One of the two is made to depend on
- *    the other (lanes_after), or written another way.
+ *    and transmittances, their conditions' compares, two fabs, and in scenes of more than four
+ *    triangles the sheared corner coordinates of a triangle test. One of the two is made to
+ *    depend on the other (lanes_after, lanes_wait), or written another way.
+ *  - a select per candidate over a dozen table entries cost less than a gather per number on PoCL
+ *    (wavefront_surface.cl's hit triangle).
  */
 #ifndef VOLCL_LANES_H
 #define VOLCL_LANES_H
@@ -38,6 +41,7 @@ inline V3 v3_madd(V3 o, float t, V3 d) { return v3(o.x + t * d.x, o.y + t * d.y,
 inline float v3_dot(V3 a, V3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
 inline float v3_max(V3 a) { return fmax(a.x, fmax(a.y, a.z)); }
 inline V3 v3_sel(bool c, V3 a, V3 b) { return v3(c ? a.x : b.x, c ? a.y : b.y, c ? a.z : b.z); }
+inline V3 lanes_div(V3 v, float s) { return v3(v.x / s, v.y / s, v.z / s); }
 
 /* v, made to depend on `dep` (exactly v, whatever dep is): two isomorphic computations side by side
  * (two shadow rays' tests and transmittances) were packed into <2 x float> vectors by the SLP
@@ -82,6 +86,17 @@ inline float rng32_float_if(Rng32 *r, bool step) {
 }
 
 /* ---- The renderer's routines on V3, each the float3 version's arithmetic */
+
+/* path_roulette (integrator.h) for the paths that go on (`going`), at their depth after the
+ * scatter: whether it ends the path; a survivor's throughput is divided by its survival chance */
+inline bool lanes_roulette(Rng32 *rng, V3 *beta, bool going, int depth, int rr_depth, float eta_scale) {
+    bool rr = going & (depth >= rr_depth);
+    float u_rr = rng32_float_if(rng, rr);
+    float q = fmin(v3_max(*beta) * eta_scale, 0.95f);
+    bool killed = rr & (u_rr >= q);
+    *beta = v3_sel(rr & !killed, lanes_div(*beta, q), *beta);
+    return killed;
+}
 
 /* phase_direction_at (phase.h): make_frame's basis about the unit `peak`, then normalized */
 inline V3 lanes_direction_at(V3 n, float w, float u) {

@@ -1,9 +1,10 @@
-/* Ray queries for the SIMD lanes over a scene small enough to test whole: the lanes stage
- * (wavefront_lanes.cl) traces with these when volcl/wavefront.py (tiny_lanes) finds the scene's
- * leaf packets hold at most TINY_LANES opaque triangles and nothing else, and builds the stage with
- * VOLCL_WF_TINY set to their number and VOLCL_WF_TINY_ENDS to a mask of the triangles that end a
- * packet. A tree walk is an inner loop, which stops the vectorizers; a fixed list of triangles
- * unrolls into straight-line code.
+/* Ray queries for the SIMD lanes over a scene small enough to test whole: the lanes stages
+ * (wavefront_lanes.cl, wavefront_surface.cl) trace with these when volcl/wavefront.py (tiny_lanes)
+ * finds the scene's leaf packets hold at most TINY_LANES opaque triangles and TINY_SPHERES opaque
+ * spheres, and builds the stage with VOLCL_WF_TINY set to the triangles' number,
+ * VOLCL_WF_TINY_ENDS to a mask of the triangles that end a packet and VOLCL_WF_SPHERES to the
+ * spheres' number. A tree walk is an inner loop, which stops the vectorizers; a fixed list of
+ * primitives unrolls into straight-line code.
  *
  * The triangles are the leaf packets' used lanes in packet order, in the stage's table
  * (wavefront_state.h WF_TRI_AT). Every test is packet_triangles_hit's
@@ -24,6 +25,19 @@ typedef struct {
 
 inline float lanes_pick(bool is0, bool is1, float a, float b, float c) { return is0 ? a : (is1 ? b : c); }
 
+/* v, made to wait for `dep`: v itself unless dep is NaN, and then the triangle test that uses it
+ * finds no hit either way (a NaN corner coordinate makes det and the distance NaN). Only in scenes
+ * of more than 4 triangles, where the SLP vectorizer packed the test's coordinates (lanes.h): the
+ * waits cost point_in_fog's 4 triangles 10-20% of the wavefront renderer's speed on PoCL. */
+#ifndef VOLCL_WF_CHAIN
+#define VOLCL_WF_CHAIN (VOLCL_WF_TINY > 4)
+#endif
+#if VOLCL_WF_CHAIN
+inline float lanes_wait(float v, float dep) { return dep == dep ? v : dep; }
+#else
+inline float lanes_wait(float v, float dep) { (void)dep; return v; }
+#endif
+
 inline LanesShear lanes_shear(V3 o, V3 d) {
     LanesShear s;
     /* |d| three ways: the same values, but two fabs side by side were packed into a <2 x float>,
@@ -43,7 +57,7 @@ inline LanesShear lanes_shear(V3 o, V3 d) {
     float dx = lanes_pick(s.x0, s.x1, d.x, d.y, d.z), dy = lanes_pick(s.y0, s.y1, d.x, d.y, d.z);
     float dz = lanes_pick(s.z0, s.z1, d.x, d.y, d.z);
     s.sx = dx / dz;
-    s.sy = dy / dz;
+    s.sy = lanes_wait(dy, s.sx) / dz;       /* (the two divisions side by side were packed: lanes.h) */
     s.sz = 1.0f / dz;
     s.ox = lanes_pick(s.x0, s.x1, o.x, o.y, o.z);
     s.oy = lanes_pick(s.y0, s.y1, o.x, o.y, o.z);
@@ -60,12 +74,14 @@ inline bool lanes_triangle_hit(__global const float *table, int k, const LanesSh
     float az = lanes_pick(s->z0, s->z1, VOLCL_TV(0), VOLCL_TV(1), VOLCL_TV(2)) - s->oz;
     float bz = lanes_pick(s->z0, s->z1, VOLCL_TV(3), VOLCL_TV(4), VOLCL_TV(5)) - s->oz;
     float cz = lanes_pick(s->z0, s->z1, VOLCL_TV(6), VOLCL_TV(7), VOLCL_TV(8)) - s->oz;
+    /* the six sheared coordinates in a chain, each waiting for the one before (lanes_wait): any two
+     * of them side by side were packed into <2 x float> vectors, in scenes of 12 triangles */
     float ax = (lanes_pick(s->x0, s->x1, VOLCL_TV(0), VOLCL_TV(1), VOLCL_TV(2)) - s->ox) - s->sx * az;
-    float ay = (lanes_pick(s->y0, s->y1, VOLCL_TV(0), VOLCL_TV(1), VOLCL_TV(2)) - s->oy) - s->sy * az;
-    float bx = (lanes_pick(s->x0, s->x1, VOLCL_TV(3), VOLCL_TV(4), VOLCL_TV(5)) - s->ox) - s->sx * bz;
-    float by = (lanes_pick(s->y0, s->y1, VOLCL_TV(3), VOLCL_TV(4), VOLCL_TV(5)) - s->oy) - s->sy * bz;
-    float cx = (lanes_pick(s->x0, s->x1, VOLCL_TV(6), VOLCL_TV(7), VOLCL_TV(8)) - s->ox) - s->sx * cz;
-    float cy = (lanes_pick(s->y0, s->y1, VOLCL_TV(6), VOLCL_TV(7), VOLCL_TV(8)) - s->oy) - s->sy * cz;
+    float ay = (lanes_pick(s->y0, s->y1, VOLCL_TV(0), VOLCL_TV(1), VOLCL_TV(2)) - lanes_wait(s->oy, ax)) - s->sy * az;
+    float bx = (lanes_pick(s->x0, s->x1, VOLCL_TV(3), VOLCL_TV(4), VOLCL_TV(5)) - lanes_wait(s->ox, ay)) - s->sx * bz;
+    float by = (lanes_pick(s->y0, s->y1, VOLCL_TV(3), VOLCL_TV(4), VOLCL_TV(5)) - lanes_wait(s->oy, bx)) - s->sy * bz;
+    float cx = (lanes_pick(s->x0, s->x1, VOLCL_TV(6), VOLCL_TV(7), VOLCL_TV(8)) - lanes_wait(s->ox, by)) - s->sx * cz;
+    float cy = (lanes_pick(s->y0, s->y1, VOLCL_TV(6), VOLCL_TV(7), VOLCL_TV(8)) - lanes_wait(s->oy, cx)) - s->sy * cz;
 #undef VOLCL_TV
     float u = cx * by - cy * bx;
     *e1 = ax * cy - ay * cx;
@@ -78,17 +94,48 @@ inline bool lanes_triangle_hit(__global const float *table, int k, const LanesSh
     return !outside & (*det != 0.0f) & in_range;
 }
 
+/* dot(a, b) as the OpenCL library computes it (no fused multiply-add) */
+inline float lanes_dot(V3 a, V3 b) {
+#pragma OPENCL FP_CONTRACT OFF
+    return (a.x * b.x + a.y * b.y) + a.z * b.z;
+}
+
+/* sphere_intersect (bvh.h) on sphere k of the table: the same arithmetic, selects for its branches */
+inline bool lanes_sphere_hit(__global const float *table, int k, V3 o, V3 d, float tmax, float *t_out) {
+#define VOLCL_SV(c) table[WF_SPH_AT(c, k)]
+    V3 f = v3_sub(o, v3(VOLCL_SV(0), VOLCL_SV(1), VOLCL_SV(2)));
+    float r = VOLCL_SV(3);
+#undef VOLCL_SV
+    float b = -lanes_dot(f, d);
+    V3 l = v3_madd(f, b, d);
+    float disc = r * r - lanes_dot(l, l);
+    float q = b + copysign(sqrt(fmax(disc, 0.0f)), b);
+    float ff = lanes_dot(f, f);
+    float c_term = ff - r * r;
+    bool zero = q == 0.0f;
+    float t0 = zero ? 0.0f : c_term / q, t1 = zero ? 0.0f : q;
+    float lo = t0 > t1 ? t1 : t0, hi = t0 > t1 ? t0 : t1;
+    /* a root this close to zero is the surface the ray just left */
+    float eps = 1e-6f * fmax(r, sqrt(ff));
+    float t = lo > eps ? lo : hi;
+    *t_out = t;
+    return !(disc < 0.0f) & (t > eps) & (t < tmax);
+}
+
 /* The closest hit in (0, tmax) (bvh_trace's TRACE_CLOSEST): whether there is one, and its
- * distance, barycentrics and primitive code. */
+ * distance, barycentrics, primitive code and, for a triangle, its lane in the table (else -1).
+ * Spheres come after the triangles: in a tree they can come before, which changes only which of a
+ * sphere and a triangle at the same distance wins. */
 inline bool lanes_closest_hit(__global const float *table, V3 o, V3 d, float tmax, float *t, float *b1, float *b2,
-                              int *prim) {
+                              int *prim, int *slot) {
     LanesShear s = lanes_shear(o, d);
     float best = tmax, pt = 0.0f, pb1 = 0.0f, pb2 = 0.0f;
-    int pprim = 0;
+    int pprim = 0, pslot = -1;
     bool found = false, any = false;
     *t = tmax;
     *b1 = *b2 = 0.0f;
     *prim = 0;
+    *slot = -1;
 #pragma unroll
     for (int k = 0; k < VOLCL_WF_TINY; ++k) {
         float ts, det, e1, e2;
@@ -102,16 +149,30 @@ inline bool lanes_closest_hit(__global const float *table, V3 o, V3 d, float tma
         pb1 = take ? e1 * inv : pb1;
         pb2 = take ? e2 * inv : pb2;
         pprim = take ? code : pprim;
+        pslot = take ? k : pslot;
         any = any | ok;
         if ((VOLCL_WF_TINY_ENDS >> k) & 1) {     /* the packet's end: its hit, if any */
             *t = any ? pt : *t;
             *b1 = any ? pb1 : *b1;
             *b2 = any ? pb2 : *b2;
             *prim = any ? pprim : *prim;
+            *slot = any ? pslot : *slot;
             found = found | any;
             best = *t;
             any = false;
         }
+    }
+#pragma unroll
+    for (int k = 0; k < VOLCL_WF_SPHERES; ++k) {
+        float tk;
+        bool ok = lanes_sphere_hit(table, k, o, d, *t, &tk);
+        int code = as_int(table[WF_SPH_AT(4, k)]);
+        *t = ok ? tk : *t;
+        *b1 = ok ? 0.0f : *b1;
+        *b2 = ok ? 0.0f : *b2;
+        *prim = ok ? code : *prim;
+        *slot = ok ? -1 : *slot;
+        found = found | ok;
     }
     return found;
 }
@@ -127,6 +188,11 @@ inline float lanes_reach(__global const float *table, V3 o, V3 d, float tmax) {
     for (int k = 0; k < VOLCL_WF_TINY; ++k) {
         float ts, det, e1, e2;
         reach = lanes_triangle_hit(table, k, &s, reach, &ts, &det, &e1, &e2) ? -1.0f : reach;
+    }
+#pragma unroll
+    for (int k = 0; k < VOLCL_WF_SPHERES; ++k) {
+        float tk;
+        reach = lanes_sphere_hit(table, k, o, d, reach, &tk) ? -1.0f : reach;
     }
     return reach;
 }

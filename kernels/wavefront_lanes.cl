@@ -28,19 +28,7 @@
 #include "lanes_triangles.h"
 #endif
 
-#define FROW(r) fs[WF_AT(r)]
-#define IROW(r) is[WF_AT(r)]
-#define TROW(r, k) table[(r) * WF_TABLE_STRIDE + (k)]
-
-inline V3 frow3(__global const float *fs, int r, int i) { return v3(FROW(r), FROW(r + 1), FROW(r + 2)); }
-
-inline V3 trow3(__global const float *table, int r, int k) { return v3(TROW(r, k), TROW(r + 1, k), TROW(r + 2, k)); }
-
-inline void frow3_put(__global float *fs, int r, int i, V3 v) {
-    FROW(r) = v.x;
-    FROW(r + 1) = v.y;
-    FROW(r + 2) = v.z;
-}
+#include "lanes_rows.h"
 
 /* transmittance_exp (media.h) */
 inline V3 lanes_transmittance(V3 sigma, float t) {
@@ -70,8 +58,6 @@ inline float lanes_distance_pdf(V3 sigma_t, V3 beta, V3 tr) {
 #endif
 }
 
-inline V3 lanes_div(V3 v, float s) { return v3(v.x / s, v.y / s, v.z / s); }
-
 #pragma clang attribute pop
 
 /* No bounds test: the host launches whole work-groups over the wave (a store under a condition would
@@ -90,8 +76,8 @@ __kernel void wavefront_medium(__global float *fs, __global int *is, __global co
 #if VOLCL_WF_TINY
     /* the closest hit of the ray the scalar stage left (a scene tested whole) */
     float hit_t, hit_b1, hit_b2;
-    int hit_prim;
-    bool hit = lanes_closest_hit(table, o, d, FROW(WF_T_MAX), &hit_t, &hit_b1, &hit_b2, &hit_prim);
+    int hit_prim, hit_slot;
+    bool hit = lanes_closest_hit(table, o, d, FROW(WF_T_MAX), &hit_t, &hit_b1, &hit_b2, &hit_prim, &hit_slot);
     flags = hit ? flags | WF_FLAG_HIT : flags & ~WF_FLAG_HIT;
 #else
     bool hit = (flags & WF_FLAG_HIT) != 0u;
@@ -227,11 +213,7 @@ __kernel void wavefront_medium(__global float *fs, __global int *is, __global co
     /* (not where NEE towards a light other than a point light is left to the scalar stage: it
      * comes before the roulette, with the throughput before it) */
     bool going = cont & !nee_later;
-    bool rr = going & (depth + 1 >= rp->rr_depth);
-    float u_rr = rng32_float_if(&rng, rr);
-    float q = fmin(v3_max(beta) * FROW(WF_ETA_SCALE), 0.95f);
-    bool killed = rr & (u_rr >= q);
-    beta = v3_sel(rr & !killed, lanes_div(beta, q), beta);
+    bool killed = lanes_roulette(&rng, &beta, going, depth + 1, rp->rr_depth, FROW(WF_ETA_SCALE));
     int steps = IROW(WF_STEPS) + (going ? 1 : 0);
     next = going ? ((killed | (steps >= VOLCL_MAX_STEPS)) ? PATH_END : WF_EV_NEXT) : next;
     IROW(WF_STEPS) = steps;
@@ -244,16 +226,7 @@ __kernel void wavefront_medium(__global float *fs, __global int *is, __global co
     uint traced = ((run & shadow0) ? WF_FLAG_SHADOW0 : 0u) | (shadow1 ? WF_FLAG_SHADOW1 : 0u);
 #endif
     IROW(WF_FLAGS) = (int)(keep | traced | (nee_later ? WF_FLAG_NEE : 0u));
-    IROW(WF_DEPTH) = cont ? depth + 1 : depth;
-    IROW(WF_RNG) = (int)rng.lo;
-    IROW(WF_RNG + 1) = (int)rng.hi;
-    frow3_put(fs, WF_BETA, i, beta);
-    frow3_put(fs, WF_O, i, v3_sel(cont, p, o));
-    frow3_put(fs, WF_D, i, v3_sel(cont, nd, d));
-    FROW(WF_T_MAX) = cont ? INFINITY : FROW(WF_T_MAX);
-    FROW(WF_T_BACK) = cont ? 0.0f : t_back;
-    FROW(WF_PREV_PDF) = cont ? pdf_dir : FROW(WF_PREV_PDF);
-    frow3_put(fs, WF_PREV_P, i, v3_sel(cont, p, frow3(fs, WF_PREV_P, i)));
+    lanes_put_scatter(fs, is, i, cont, depth, &rng, beta, p, pdf_dir, p, nd, 0.0f);
 #if VOLCL_WF_TINY
     /* the shadow rays here too, as wf_shadow (wavefront.cl) traces them: the segment's
      * transmittance in the path's medium unless a triangle blocks it */

@@ -13,6 +13,13 @@
 #ifndef VOLCL_WAVEFRONT_STATE_H
 #define VOLCL_WAVEFRONT_STATE_H
 
+#ifndef VOLCL_WF_SPHERES
+#define VOLCL_WF_SPHERES 0      /* spheres of a scene tested whole (lanes_triangles.h) */
+#endif
+#ifndef VOLCL_WF_LIGHT_TRIS
+#define VOLCL_WF_LIGHT_TRIS 0   /* area-light triangles the surface stage samples (wavefront_surface.cl) */
+#endif
+
 #define WF_STRIDE 65552
 #define WF_AT(r) ((r) * WF_STRIDE + i)
 
@@ -28,11 +35,34 @@
 #define WF_T_ISO 13             /* 1 for the isotropic phase function, else 0 */
 #define WF_T_LANES 14           /* 1 where the lanes stage handles the medium (homogeneous), else 0 */
 #define WF_T_POINT 15           /* 1 for a point light, which the lanes stage samples itself, else 0 */
-#define WF_TABLE_ROWS 16
-/* then a tiny scene's triangle lanes (lanes_triangles.h): coordinate c (p0 xyz, p1 xyz, p2 xyz, then
- * the primitive code's int bits) of lane k, every number a cache line from the next (neighbouring
- * words were packed into vectors again) */
+#define WF_T_AREA 16            /* an area light's area */
+#define WF_TABLE_ROWS 17
+/* then a tiny scene's triangle lanes (lanes_triangles.h): coordinate c of lane k, every number a
+ * cache line from the next (neighbouring words were packed into vectors again). Coordinates: p0
+ * xyz, p1 xyz, p2 xyz, the primitive code's int bits; for the surface stage (wavefront_surface.cl)
+ * the geometric normal xyz (the library's normalize, computed by the host), the magnitude of the
+ * corners, 1 where the stage scatters from the triangle itself (plain diffuse), its reflectance
+ * rgb, 1 for a two-sided bsdf */
+#define WF_TRI_COORDS 19
 #define WF_TRI_AT(c, k) (WF_TABLE_ROWS * WF_TABLE_STRIDE + ((c) * VOLCL_WF_TINY + (k)) * 16)
+#define WF_TRI_NG 10
+#define WF_TRI_MAG 13
+#define WF_TRI_LANES 14
+#define WF_TRI_COLOR 15
+#define WF_TRI_TWOSIDED 18
+/* then the spheres (VOLCL_WF_SPHERES): centre xyz, radius, primitive code's int bits */
+#define WF_SPH_COORDS 5
+#define WF_SPH_AT(c, k) (WF_TRI_AT(WF_TRI_COORDS, 0) + ((c) * VOLCL_WF_SPHERES + (k)) * 16)
+/* then the area lights' triangles in light order (VOLCL_WF_LIGHT_TRIS, the surface stage): the
+ * light's index (int bits), the cdf over its triangles at this one and before it, 1 for its last
+ * triangle, p0 xyz, p1 xyz, p2 xyz, the normal xyz */
+#define WF_LT_AT(c, j) (WF_SPH_AT(WF_SPH_COORDS, 0) + ((c) * VOLCL_WF_LIGHT_TRIS + (j)) * 16)
+#define WF_LT_LIGHT 0
+#define WF_LT_CDF 1
+#define WF_LT_BEFORE 2
+#define WF_LT_LAST 3
+#define WF_LT_P 4
+#define WF_LT_NG 13
 
 /* float rows */
 #define WF_L 0              /* 3 rows each: x, y, z */
@@ -85,6 +115,7 @@
 #define WF_EV_MEDIUM 16     /* the ray is traced: its medium segment is next */
 #define WF_EV_START 17      /* a new sample starts */
 #define WF_EV_NEXT 18       /* (VOLCL_WF_TINY) the lanes stage took the whole step, roulette included:
-                             * the scalar stage leaves the path alone, the lanes stage traces it next */
+                             * the scalar stage leaves the path alone, the lanes stage traces it next
+                             * (a scatter in a medium, or from a diffuse surface: wavefront_surface.cl) */
 
 #endif

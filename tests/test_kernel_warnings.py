@@ -2,9 +2,9 @@
 clang's static analyzer, for the program with every feature compiled in; and every specialization
 (no feature, each feature alone, all features but one) under the same warnings less the
 unused-parameter and unused-variable family (code a specialization compiles out leaves its
-arguments unused, by design). The wavefront renderer's entry points (wavefront.cl, wavefront_lanes.cl)
-are checked with every feature compiled in, with and without the lanes stage's whole-scene tests. Skipped, with the reason, where clang is absent (`./quickstart test`
-installs it)."""
+arguments unused, by design). The wavefront renderer's entry points (wavefront.cl, wavefront_lanes.cl,
+wavefront_surface.cl) are checked with every feature compiled in, with and without the lanes stage's
+whole-scene tests. Skipped, with the reason, where clang is absent (`./quickstart test` installs it)."""
 import shutil
 import subprocess
 
@@ -34,9 +34,10 @@ def _specializations():
 
 
 # (file, extra options): the wavefront stages also as built for a scene tested whole (volcl.wavefront:
-# 6 triangles in packets of 4 and 2)
-TINY = ["-DVOLCL_WF_TINY=6", "-DVOLCL_WF_TINY_ENDS=40"]
-ENTRY_POINTS = ["render.cl", "wavefront.cl", "wavefront_lanes.cl", "wavefront.cl tiny", "wavefront_lanes.cl tiny"]
+# 6 triangles in packets of 4 and 2, 2 spheres, 3 light triangles)
+TINY = ["-DVOLCL_WF_TINY=6", "-DVOLCL_WF_TINY_ENDS=40", "-DVOLCL_WF_SPHERES=2", "-DVOLCL_WF_LIGHT_TRIS=3"]
+ENTRY_POINTS = ["render.cl", "wavefront.cl", "wavefront_lanes.cl", "wavefront.cl tiny", "wavefront_lanes.cl tiny",
+                "wavefront_surface.cl tiny"]
 
 
 def _compile(args, features, entry="render.cl"):

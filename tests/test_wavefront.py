@@ -51,10 +51,10 @@ ESTIMATORS = {
 }
 
 
-def _channels_off(image, reference):
-    """The share of pixel channels that differ from the reference's by more than 1e-3 relative."""
+def _channels_off(image, reference, limit=1e-3):
+    """The share of pixel channels that differ from the reference's by more than `limit` relative."""
     rel = np.abs(image - reference) / np.maximum(np.abs(reference), 1e-6)
-    return float(np.mean(rel > 1e-3))
+    return float(np.mean(rel > limit))
 
 
 def _scene(name):
@@ -99,22 +99,28 @@ def test_same_image_as_megakernel(device, name):
 
 def test_auto_takes_it_where_it_pays(device):
     """"auto" (the default) renders point_in_fog (camera in the fog, a point light) with the wavefront
-    renderer on CPUs, and the fog box (an area light) and the Cornell box (no medium) with the
-    megakernel."""
-    expected = {"point_in_fog": "wavefront" if device.kind == "cpu" else "megakernel", "fog": "megakernel",
-                "cbox": "megakernel"}
+    renderer on CPUs, the fog box (an area light) with the megakernel, and the Cornell box (no
+    medium: the surface stage) with the wavefront renderer on Intel's CPU runtime alone."""
+    cpu = device.kind == "cpu"
+    intel = cpu and "intel" in device.platform_name.lower()
+    expected = {"point_in_fog": "wavefront" if cpu else "megakernel", "fog": "megakernel",
+                "cbox": "wavefront" if intel else "megakernel"}
     for name, engine in expected.items():
         r = Renderer(volcl.load_file(SCENES / f"{name}.xml", width=8, height=8), device=device)
         assert r.engine == engine, name
 
 
 def test_says_why_not(device):
-    """A scene without media (the lanes stage's case) is refused by name, not rendered otherwise."""
-    cbox = volcl.load_file(SCENES / "cbox.xml", width=8, height=8)
-    with pytest.raises(VolclError, match="wavefront renderer cannot render this scene"):
-        Renderer(cbox, device=device, engine="wavefront")
+    """A scene outside both stages' case (no medium, and an environment light the surface stage does
+    not sample) is refused by name, not rendered otherwise."""
+    if device.kind != "cpu":
+        pytest.skip("the wavefront renderer is for CPU devices")
+    text = (SCENES / "cbox.xml").read_text().replace("</scene>", '<emitter type="constant"/></scene>')
+    scene = volcl.load_string(text, base_dir=SCENES, width=8, height=8)
+    with pytest.raises(VolclError, match="wavefront renderer cannot render this scene.*point lights and area lights"):
+        Renderer(scene, device=device, engine="wavefront")
     with pytest.raises(VolclError, match="engine"):
-        Renderer(cbox, device=device, engine="lanes")
+        Renderer(scene, device=device, engine="lanes")
 
 
 def _tree_route(r):
@@ -147,6 +153,22 @@ def test_whole_scene_tests_match_the_tree(device, name):
         else:
             off = _channels_off(a.image, b.image)
             assert off < 0.02, f"{what}: {off:.2%} of channels differ by > 1e-3"
+
+
+@pytest.mark.parametrize("name", ["fog", "milk_glass"])
+def test_spheres_tested_whole(device, name):
+    """Spheres in a scene tested whole (the fog box's two, milk_glass's medium-filled one): the lanes
+    stage's sphere test (lanes_sphere_hit) gives sphere_intersect's bits, so the image is the one the
+    scalar stage's BVH queries give, bit for bit."""
+    if device.kind != "cpu":
+        pytest.skip("the wavefront renderer is for CPU devices")
+    scene = volcl.load_file(SCENES / f"{name}.xml", width=24, height=24)
+    tiny = Renderer(scene, device=device, seed=5, engine="wavefront")
+    assert tiny.wavefront.tiny > 0 and wavefront.tiny_lanes(tiny.packed, tiny.features)[2] > 0
+    a = tiny.render(4)
+    b = _tree_route(Renderer(scene, device=device, seed=5, engine="wavefront")).render(4)
+    assert a.image.mean() > 0.01, "a black image compares nothing"
+    assert np.array_equal(a.image, b.image), f"{np.mean(a.image != b.image):.2%} of channels differ"
 
 
 def test_tree_route_same_paths_as_megakernel(device):
@@ -188,14 +210,130 @@ def _with_shape(shape_xml):
 
 @pytest.mark.parametrize("shape, expect", [
     ("", 12),           # the box: 12 triangles, three packets
-    ('<shape type="sphere"><float name="radius" value="0.2"/><bsdf type="diffuse"/><ref name="exterior" id="haze"/></shape>', 0),
+    # a sphere is tested whole too (lanes_sphere_hit)
+    ('<shape type="sphere"><float name="radius" value="0.2"/><bsdf type="diffuse"/><ref name="exterior" id="haze"/></shape>', 12),
     ('<shape type="rectangle"><bsdf type="null"/><ref name="exterior" id="haze"/></shape>', 0),
     ('<shape type="rectangle"><bsdf type="thindielectric"/><ref name="exterior" id="haze"/></shape>', 0),
     # a dielectric blocks shadow rays in the megakernel too (refraction is specular)
     ('<shape type="rectangle"><bsdf type="dielectric"/><ref name="exterior" id="haze"/></shape>', 14),
 ])
 def test_which_scenes_are_tested_whole(device, shape, expect):
-    """Only opaque triangles, at most wavefront.TINY_LANES packet lanes: an analytic sphere, a null
-    or a thin glass surface (which shadow rays cross) send the scene to the scalar stage's queries."""
+    """Only opaque triangles and spheres, at most wavefront.TINY_LANES and TINY_SPHERES: a null or a
+    thin glass surface (which shadow rays cross) sends the scene to the scalar stage's queries."""
     r = Renderer(_with_shape(shape), device=device, engine="megakernel")
     assert wavefront.tiny_lanes(r.packed, r.features)[0] == expect
+
+
+# The surface stage's case (kernels/wavefront_surface.cl): no medium, 16 triangles and two spheres.
+# A two-sided diffuse box (seen from inside, against its outward normals), two area lights of two
+# triangles each (the pick between them and the cdf over their triangles) and a point light, a
+# diffuse sphere and a glass one (which the scalar stage scatters from)
+SURFACES = """<scene version="3.0.0">
+    <default name="max_depth" value="-1"/>
+    <integrator type="path"><integer name="max_depth" value="$max_depth"/></integrator>
+    <sensor type="perspective">
+        <float name="fov" value="70"/>
+        <transform name="to_world"><lookat origin="0, 0, 3.5" target="0, 0, 0" up="0, 1, 0"/></transform>
+        <film type="hdrfilm"><integer name="width" value="24"/><integer name="height" value="18"/></film>
+    </sensor>
+    <emitter type="point"><point name="position" value="0.5, 0.6, 0"/><rgb name="intensity" value="3, 3, 3"/></emitter>
+    <shape type="cube">
+        <bsdf type="twosided"><bsdf type="diffuse"><rgb name="reflectance" value="0.7, 0.6, 0.5"/></bsdf></bsdf>
+        <transform name="to_world"><scale value="4"/></transform>
+    </shape>
+    <shape type="rectangle">
+        <transform name="to_world"><scale value="0.8"/><rotate x="1" angle="90"/><translate y="3.9"/></transform>
+        <emitter type="area"><rgb name="radiance" value="4, 4, 4"/></emitter>
+    </shape>
+    <shape type="rectangle">
+        <transform name="to_world"><scale value="0.5"/><rotate y="1" angle="90"/><translate x="-3.9"/></transform>
+        <emitter type="area"><rgb name="radiance" value="1, 2, 3"/></emitter>
+    </shape>
+    <shape type="sphere">
+        <point name="center" value="0.8, -1, 0"/><float name="radius" value="0.5"/>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0.3, 0.5, 0.7"/></bsdf>
+    </shape>
+    <shape type="sphere">
+        <point name="center" value="-0.8, -0.8, 0.5"/><float name="radius" value="0.4"/>
+        <bsdf type="dielectric"/>
+    </shape>
+</scene>"""
+
+SURFACE_CASES = {
+    "default": (Estimator(), {}),
+    "MIS off": (Estimator(mis=False), {}),
+    "NEE off": (Estimator(nee=False), {}),
+    "max_depth 3": (Estimator(), {"max_depth": 3}),
+}
+
+
+def _surface_scene(name, **defaults):
+    if name == "cbox":
+        return volcl.load_file(SCENES / "cbox.xml", width=32, height=32, **defaults)
+    return volcl.load_string(SURFACES, **defaults)
+
+
+@pytest.mark.parametrize("name", ["cbox", "surfaces"])
+@pytest.mark.parametrize("what", sorted(SURFACE_CASES))
+def test_surface_stage_same_paths_as_megakernel(device, name, what):
+    """A scene without media tested whole: the surface stage scatters from its diffuse triangles
+    itself (NEE towards point and area lights, the shadow ray, the new direction, the roulette),
+    draw for draw, with the megakernel's arithmetic and no vector exp or log, so one seed gives the
+    megakernel's image (bit for bit on PoCL and Intel's runtime on the AVX-512 host; the limit of
+    1e-5 leaves another compiler room to contract a multiply-add differently)."""
+    if device.kind != "cpu":
+        pytest.skip("the wavefront renderer is for CPU devices")
+    estimator, defaults = SURFACE_CASES[what]
+    scene = _surface_scene(name, **defaults)
+    r = Renderer(scene, device=device, estimator=estimator, seed=3, engine="wavefront")
+    assert r.wavefront.surface and r.wavefront.tiny > 0
+    mk = Renderer(scene, device=device, estimator=estimator, seed=3, engine="megakernel").render(8)
+    wf = r.render(8)
+    assert mk.image.mean() > 0.01, "a black image compares nothing"
+    assert wf.invalid == 0 and mk.invalid == 0
+    off = _channels_off(wf.image, mk.image, 1e-5)
+    assert off < 0.01, f"{off:.3%} of pixel channels differ by more than 1e-5"
+    np.testing.assert_allclose(wf.image.mean(), mk.image.mean(), rtol=1e-5)
+
+
+def test_surface_stage_same_image_as_megakernel(device):
+    """Two seeds: the surface stage's image is the megakernel's within the standard errors."""
+    if device.kind != "cpu":
+        pytest.skip("the wavefront renderer is for CPU devices")
+    scene = _surface_scene("surfaces")
+    mk, wf = _pair(device, scene, Estimator(), 64, seeds=(1, 2))
+    assert mk.image.mean() > 0.01, "a black image compares nothing"
+    assert_same_image(mk, wf, what="surfaces: megakernel and wavefront")
+
+
+@pytest.mark.parametrize("change, why", [
+    ('<emitter type="constant"/>', "point lights and area lights on triangles only"),
+    ('<shape type="sphere"><float name="radius" value="0.1"/><emitter type="area"/></shape>',
+     "point lights and area lights on triangles only"),
+    ('<shape type="obj"><string name="filename" value="meshes/glass_sphere.obj"/></shape>', "not small enough"),
+    ('medium', None),       # the camera in a medium, with volpath
+])
+def test_which_scenes_the_surface_stage_takes(device, change, why):
+    """The surface stage takes a scene without media small enough to test whole and lit by point
+    lights and area lights on triangles; it says why it will not take the others (a scene with a
+    medium is the medium stage's)."""
+    if device.kind != "cpu":
+        pytest.skip("the wavefront renderer is for CPU devices")
+    text = (SCENES / "cbox.xml").read_text()
+    if change == "medium":
+        text = text.replace('<scene version="3.0.0">', '<scene version="3.0.0"><medium type="homogeneous" id="m"/>')
+        text = text.replace("<sampler", '<ref id="m"/><sampler').replace('type="path"', 'type="volpath"')
+    else:
+        text = text.replace("</scene>", change + "</scene>")
+    r = Renderer(volcl.load_string(text, base_dir=SCENES, width=8, height=8), device=device, engine="megakernel")
+    reason = wavefront.surface_lanes(r.packed, r.features, r.params)
+    if why is None:
+        assert reason == "the surface stage is for scenes without media"
+    else:
+        assert reason is not None and why in reason
+    assert wavefront.surface_lanes(*_packed(device, volcl.load_file(SCENES / "cbox.xml", width=8, height=8))) is None
+
+
+def _packed(device, scene):
+    r = Renderer(scene, device=device, engine="megakernel")
+    return r.packed, r.features, r.params

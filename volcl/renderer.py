@@ -69,8 +69,9 @@ class Renderer:
     accumulating sample passes.
 
     `slots` and `launch_pixels` (pixels per launch) override the defaults, for tests.
-    `engine`: "megakernel", "wavefront" (volcl.wavefront's stage kernels: homogeneous media on
-    CPUs, the same samples), or "auto": the wavefront renderer where volcl.wavefront.pays().
+    `engine`: "megakernel", "wavefront" (volcl.wavefront's stage kernels on CPUs: homogeneous media,
+    or small scenes without media; the same samples), or "auto": the wavefront renderer where
+    volcl.wavefront.pays().
     `launch_seconds` is the time budget of one launch: by default GPU_LAUNCH_SECONDS on GPUs and
     none elsewhere (a CPU device runs fixed launches of up to MAX_ITEMS work items, with no timing
     in between). `majorant_cells` applies when a model Scene is packed here.
@@ -152,7 +153,9 @@ class Renderer:
         why_not = wavefront.supported(self.features, self.packed, self.params, self.device)
         if why_not is not None and engine == "wavefront":
             raise VolclError(f"the wavefront renderer cannot render this scene: {why_not}")
-        if why_not is not None or (engine == "auto" and not wavefront.pays(self.packed, self.params)):
+        if why_not is not None:
+            return None
+        if engine == "auto" and not wavefront.pays(self.features, self.packed, self.params, self.device):
             return None
         return wavefront.Wavefront(self.device, self.features, self.packed, self.group_items)
 

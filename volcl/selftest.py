@@ -8,7 +8,9 @@ rendered with the feature sets real scenes specialize to, catch that kind of fai
            pixel's mean is exp(-sigma (d_cam + r)) (R / pi) I cos / r^2, integrated here over the
            pixel by quadrature; rendered twice with the same seed, which must give the same bits;
   furnace  an albedo-1, chromatic, anisotropic medium in a closed box whose walls emit 1 and
-           reflect a: L = 1 / (1 - a) everywhere.
+           reflect a: L = 1 / (1 - a) everywhere;
+  bare     the wall without the medium, where the wavefront renderer's surface stage renders it
+           (volcl.wavefront.surface_stage_pays): (R / pi) I cos / r^2.
 
 Each image's mean per channel, and over 2x2 blocks, must lie within Z_LIMIT standard errors of
 its answer (the renders' own variance estimates) with no invalid samples. Seeds are fixed, so
@@ -24,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import wavefront
 from .scene.model import Bsdf, Camera, Emitter, Filter, Integrator, Medium, Phase, Scene, Shape, rgb
 
 Z_LIMIT = 6.0
@@ -42,7 +45,7 @@ def _scene(shapes, emitters, medium, fov, max_depth, seed=3) -> Scene:
     cam = Camera(to_world=np.eye(4), fov=fov, width=SIZE, height=SIZE, rfilter=Filter("box", 0.5, 0.5),
                  medium=medium)
     sc = Scene(path="<self-test>", dialect="mitsuba", camera=cam, seed=seed, shapes=shapes,
-               emitters=emitters, media=[medium])
+               emitters=emitters, media=[medium] if medium is not None else [])
     sc.integrator = Integrator("volpathmis", max_depth=max_depth)
     return sc
 
@@ -54,8 +57,8 @@ SIGMA = np.array([0.2, 0.5, 1.2])
 WALL_FOV = 20.0
 
 
-def wall_scene() -> Scene:
-    fog = Medium("homogeneous", sigma_t=SIGMA.copy(), albedo=rgb(0.0))
+def wall_scene(absorbing: bool = True) -> Scene:
+    fog = Medium("homogeneous", sigma_t=SIGMA.copy(), albedo=rgb(0.0)) if absorbing else None
     s = 5.0
     verts = np.array([[-s, -s, WALL_Z], [s, -s, WALL_Z], [s, s, WALL_Z], [-s, s, WALL_Z]])
     wall = Shape("mesh", Bsdf("diffuse", reflectance=rgb(WALL_R), twosided=True), vertices=verts,
@@ -64,7 +67,7 @@ def wall_scene() -> Scene:
     return _scene([wall], [light], fog, WALL_FOV, max_depth=2)
 
 
-def wall_expected(sc: Scene, sub: int = 8) -> np.ndarray:
+def wall_expected(sc: Scene, sub: int = 8, sigma=SIGMA) -> np.ndarray:
     """Each pixel's mean radiance (box filter): the midpoint rule on sub x sub points per pixel."""
     cam = sc.camera
     t = math.tan(math.radians(cam.fov) / 2)
@@ -78,7 +81,7 @@ def wall_expected(sc: Scene, sub: int = 8) -> np.ndarray:
     r = np.linalg.norm(v, axis=-1)
     cos = np.abs(v[..., 2]) / r
     direct = (WALL_R / math.pi) * LIGHT_I * cos / r ** 2
-    L = np.exp(-SIGMA * (cam_dist + r)[..., None]) * direct[..., None]
+    L = np.exp(-np.asarray(sigma) * (cam_dist + r)[..., None]) * direct[..., None]
     return L.reshape(SIZE, sub, SIZE, sub, 3).mean(axis=(1, 3))
 
 
@@ -117,6 +120,19 @@ def _z_failures(what, res, expected) -> list[str]:
     return out
 
 
+def _bare_wall_failures(info) -> list[str]:
+    """The wall without its medium, through the surface stage (its own program build: only on the
+    devices where "auto" renders such scenes with it)."""
+    from .renderer import Renderer
+    bare = wall_scene(absorbing=False)
+    try:
+        res = Renderer(bare, device=info, engine="wavefront").render(SPP)
+    except Exception as exc:
+        text = str(exc).strip().splitlines()
+        return [f"surface stage render failed: {text[-1] if text else type(exc).__name__}"]
+    return _z_failures("point light on a bare wall (surface stage)", res, wall_expected(bare, sigma=np.zeros(3)))
+
+
 def run(info) -> SelfTest:
     """Render the self-test scenes on device `info` (a volcl.device.DeviceInfo)."""
     from .features import detect
@@ -140,6 +156,8 @@ def run(info) -> SelfTest:
         failures.append("the same seed gave different images (the kernel reads something undefined)")
     failures += _z_failures(f"medium furnace (1 / (1 - a) = {1 / (1 - FURNACE_A):g})", furnace,
                             1 / (1 - FURNACE_A))
+    if not failures and wavefront.surface_stage_pays(info):
+        failures += _bare_wall_failures(info)
     seconds = time.perf_counter() - t0
     if failures:
         return SelfTest(False, "; ".join(failures), seconds)

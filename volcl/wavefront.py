@@ -1,6 +1,6 @@
 """The wavefront renderer: a render_pass launch (kernels/render.cl) done as a loop of two stage
-kernels over the same work-items, so that the medium steps of homogeneous media run in the CPU's
-SIMD lanes.
+kernels over the same work-items, so that the medium steps of homogeneous media, and the diffuse
+bounces of small scenes without media, run in the CPU's SIMD lanes.
 
 volcl's megakernel takes one path per work-item through everything, and no CPU runtime vectorizes
 it (README, "Can a wavefront stage run in the SIMD lanes?"). Here each work-item's path keeps its
@@ -16,9 +16,13 @@ path another way.
 
 It renders scenes whose media are all homogeneous, with the path integrator, on CPU devices; the
 lanes stage samples point lights itself and leaves NEE towards other lights to the scalar stage.
-A scene of a few opaque triangles (tiny_lanes) needs no BVH: the lanes stage tests every triangle
-for the closest hit and the medium event's two shadow rays (kernels/lanes_triangles.h), with the
-BVH's bits, so those queries run in the lanes too, and it takes the roulette after a scatter.
+A scene of a few opaque triangles and spheres (tiny_lanes) needs no BVH: the lanes stage tests
+every primitive for the closest hit and the medium event's two shadow rays
+(kernels/lanes_triangles.h), with the BVH's bits, so those queries run in the lanes too, and it
+takes the roulette after a scatter. Such a scene without media (surface_lanes) gets the surface
+stage instead (kernels/wavefront_surface.cl): the closest hit, and at a plain diffuse triangle the
+whole bounce (NEE towards point lights and area lights on triangles, its shadow ray, the new
+direction, the roulette), bit for bit the megakernel's; other surfaces go to the scalar stage.
 A Renderer takes it by itself ("auto") where it pays (pays()), or when asked (engine="wavefront").
 """
 from __future__ import annotations
@@ -42,12 +46,18 @@ ROW_EVENT = 5
 FLAG_ALIVE = 1
 EVENT_START = 17
 TABLE_STRIDE = 64
-TABLE_ROWS = 16
-T_LIGHT_POS, T_LIGHT_VALUE, T_SIGMA_T, T_ALBEDO, T_G, T_ISO, T_LANES, T_POINT = 0, 3, 6, 9, 12, 13, 14, 15
+TABLE_ROWS = 17
+T_LIGHT_POS, T_LIGHT_VALUE, T_SIGMA_T, T_ALBEDO, T_G, T_ISO, T_LANES, T_POINT, T_AREA = 0, 3, 6, 9, 12, 13, 14, 15, 16
 TRI_SPACING = 16        # words between a tiny scene's triangle numbers (wavefront_state.h WF_TRI_AT)
-# the most triangles of a scene the lanes stage traces itself, testing every one for every ray
-# (kernels/lanes_triangles.h)
+TRI_COORDS, SPHERE_COORDS, LIGHT_TRI_COORDS = 19, 5, 16     # numbers per triangle, sphere, light triangle
+# the most triangles and spheres of a scene the lanes stage traces itself, testing every one for
+# every ray (kernels/lanes_triangles.h), and light triangles the surface stage samples
 TINY_LANES = 16
+TINY_SPHERES = 4
+TINY_LIGHT_TRIANGLES = 16
+# bsdf flags that a diffuse surface in the surface stage must not have (the others concern
+# microfacets and bump maps)
+FLAG_UV, FLAG_UV_FRAME, FLAG_PASSES = (layout.BSDF_FLAGS[k] for k in ("uv", "uv_frame", "passes"))
 # steps between looks at whether every path has finished (the host reads the flags as the next
 # batch runs)
 CHECK_EVERY = 8
@@ -57,6 +67,7 @@ CHECK_EVERY = 8
 PATHS = 4096
 
 LANES_FILE = "wavefront_lanes.cl"
+SURFACE_FILE = "wavefront_surface.cl"
 SCALAR_FILE = "wavefront.cl"
 
 ENGINES = ("auto", "megakernel", "wavefront")
@@ -64,11 +75,11 @@ ENGINES = ("auto", "megakernel", "wavefront")
 
 def supported(features: dict, packed, params, device) -> str | None:
     """Why the wavefront renderer cannot render this, or None when it can: a CPU, media all
-    homogeneous, no spot lights."""
+    homogeneous, no spot lights; or no media and what the surface stage takes (surface_lanes)."""
     if device.kind != "cpu":
         return "the lanes stage is written for CPU vectorizers; a GPU runs the megakernel's work-items in lanes already"
     if not features.get("MEDIA"):
-        return "the scene has no medium, which the lanes stage steps through"
+        return surface_lanes(packed, features, params)
     for name in ("GRID_MEDIA", "EMISSIVE_MEDIA", "EMISSION_NEE", "PHASE_FAMILIES", "DIRECT", "SPOT_LIGHTS"):
         if features.get(name):
             return f"feature {name} is not in the lanes stage"
@@ -80,49 +91,168 @@ def supported(features: dict, packed, params, device) -> str | None:
     return None
 
 
-def pays(packed, params) -> bool:
-    """Whether "auto" takes the wavefront renderer for a scene it supports: where the lanes stage
-    does most of the work, the camera inside a medium (every camera segment is a medium segment) lit
-    by point lights alone (all NEE in the lanes). Measured on the shipped scenes (README, "The
-    wavefront renderer"): point_in_fog 1.84x the megakernel's speed on PoCL and 2.25x on Intel's
-    runtime (tested whole, tiny_lanes; 1.03-1.26x and 1.22-1.48x through the BVH); scenes with
-    area or environment lights, or the camera outside the medium, 0.45x-0.83x."""
+def pays(features: dict, packed, params, device) -> bool:
+    """Whether "auto" takes the wavefront renderer for a scene it supports, as measured on the
+    shipped scenes (README, "The wavefront renderer"):
+    - with media, where the lanes stage does most of the work: the camera inside a medium (every
+      camera segment is a medium segment) lit by point lights alone (all NEE in the lanes).
+      point_in_fog: 1.84x the megakernel's speed on PoCL and 2.25x on Intel's runtime (tested
+      whole, tiny_lanes; 1.03-1.26x and 1.22-1.48x through the BVH); scenes with area or
+      environment lights, or the camera outside the medium, 0.45x-0.83x;
+    - without media (the surface stage), on Intel's CPU runtime only: cbox 1.19x the megakernel's
+      speed there, 0.78x on PoCL (whose vectorized stage runs 8 lanes and took twice Intel's time
+      a path)."""
     lights = packed.arrays["lights"]
-    return (int(params["camera_medium"]) >= 0 and len(lights) > 0
-            and bool(np.all(lights["type"] == layout.LIGHT_TYPES["point"])))
+    if not features.get("MEDIA"):
+        return surface_stage_pays(device)
+    if int(params["camera_medium"]) < 0:
+        return False
+    return len(lights) > 0 and bool(np.all(lights["type"] == layout.LIGHT_TYPES["point"]))
+
+
+def surface_stage_pays(device) -> bool:
+    """Whether "auto" takes the surface stage on this device (where surface_lanes() takes the
+    scene): on Intel's CPU runtime (cbox 1.21x the megakernel's speed), not on PoCL (0.80x)."""
+    return device.kind == "cpu" and "intel" in device.platform_name.lower()
 
 
 def _used_lanes(leaves) -> np.ndarray:
-    """(packets, lanes) mask of the leaf packets' lanes that hold a triangle (unused lanes hold the
-    zero triangle)."""
+    """(packets, lanes) mask of the leaf packets' triangle lanes (unused lanes hold the zero
+    triangle, analytic ones a negative code)."""
     return np.any(leaves["v"] != 0, axis=1)
 
 
-def tiny_lanes(packed, features: dict) -> tuple[int, int]:
-    """The triangles the lanes stage tests for every ray when the scene is small enough to trace
-    whole, as (how many, a mask of those that end a leaf packet): at most TINY_LANES triangles, every
-    primitive an opaque triangle (so a shadow ray is blocked by any hit); else (0, 0)."""
+def tiny_lanes(packed, features: dict) -> tuple[int, int, int]:
+    """What the lanes stage tests for every ray when the scene is small enough to trace whole, as
+    (triangles, a mask of those that end a leaf packet, spheres): at most TINY_LANES triangles and
+    TINY_SPHERES spheres, every primitive opaque (so a shadow ray is blocked by any hit); else
+    (0, 0, 0)."""
     leaves = packed.arrays["leaves"]
     used = _used_lanes(leaves)
-    count = int(used.sum())
-    if (features.get("INSTANCES") or count == 0 or count > TINY_LANES or np.any(leaves["prim"] < 0)
-            or not np.all(leaves["opaque"][used] == -1)):
-        return 0, 0
+    spheres = leaves["prim"] < 0
+    count, n_spheres = int(used.sum()), int(spheres.sum())
+    if (features.get("INSTANCES") or features.get("CYLINDERS") or count == 0 or count > TINY_LANES
+            or n_spheres > TINY_SPHERES or not np.all(leaves["opaque"][used | spheres] == -1)):
+        return 0, 0, 0
     # the packets' lanes are filled first to last: a packet's last used lane ends it
     ends = np.cumsum(used.sum(axis=1))[used.any(axis=1)] - 1
-    return count, int(np.sum(1 << ends))
+    return count, int(np.sum(1 << ends)), n_spheres
 
 
-def lanes_table(packed, tiny: int = 0) -> np.ndarray:
-    """The lights' and media's parameters the lanes stage reads (wavefront_state.h's table), and
-    with `tiny` the scene's triangles in packet order (lanes_triangles.h)."""
+def _library_normals(p0, p1, p2):
+    """normalize(cross(p1 - p0, p2 - p0)) in float32 as the OpenCL library computes it on PoCL (no
+    fused multiply-adds, v * (1 / sqrt(|v|^2))), and where that holds: not for a zero, tiny or
+    huge cross product, which the library scales first."""
+    a, b = (p1 - p0).astype(np.float32), (p2 - p0).astype(np.float32)
+    c = np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+                  a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
+    with np.errstate(all="ignore"):
+        l2 = (c[:, 0] * c[:, 0] + c[:, 1] * c[:, 1]) + c[:, 2] * c[:, 2]
+        n = c * (np.float32(1.0) / np.sqrt(l2))[:, None]
+    ok = (l2 >= np.finfo(np.float32).tiny) & np.isfinite(l2)
+    return n.astype(np.float32), ok
+
+
+def _tiny_triangles(packed, count):
+    """The tested triangles' corners (count, 3, 3) and primitive codes, in packet order."""
+    leaves = packed.arrays["leaves"]
+    used = _used_lanes(leaves)
+    return leaves["v"].transpose(0, 2, 1)[used].reshape(count, 3, 3), leaves["prim"][used]
+
+
+def _lanes_surfaces(packed, corners, codes):
+    """Which tested triangles the surface stage scatters from itself (wavefront_surface.cl): plain
+    diffuse, untextured, flat, not emitting, with a normal whose library bits are known; and their
+    normals and bsdf records."""
+    tris, shapes, bsdfs = packed.arrays["triangles"], packed.arrays["shapes"], packed.arrays["bsdfs"]
+    shape = shapes[tris["shape"][codes]]
+    bsdf = bsdfs[shape["bsdf"]]
+    ng, ok = _library_normals(corners[:, 0], corners[:, 1], corners[:, 2])
+    lanes = (ok & (bsdf["type"] == layout.BSDF_TYPES["diffuse"]) & (bsdf["color_tex"] < 0)
+             & (bsdf["flags"] & (FLAG_UV | FLAG_UV_FRAME | FLAG_PASSES) == 0)
+             & (shape["light"] < 0) & (tris["normals"][codes] < 0))
+    return lanes, ng, bsdf
+
+
+def surface_lanes(packed, features: dict, params) -> str | None:
+    """Why the surface stage (wavefront_surface.cl) cannot take this scene, or None when it can: a
+    scene without media tested whole (tiny_lanes), lit by point lights and area lights on at most
+    TINY_LIGHT_TRIANGLES flat triangles, rendered by the path integrator."""
+    if features.get("MEDIA"):
+        return "the surface stage is for scenes without media"
+    if tiny_lanes(packed, features)[0] == 0:
+        return (f"the scene is not small enough to test whole (at most {TINY_LANES} opaque triangles and "
+                f"{TINY_SPHERES} spheres)")
+    lights = packed.arrays["lights"]
+    area = lights["type"] == layout.LIGHT_TYPES["area"]
+    point = lights["type"] == layout.LIGHT_TYPES["point"]
+    if not np.all(point | (area & (lights["sphere"] < 0))):
+        return "the surface stage samples point lights and area lights on triangles only"
+    if len(lights) > TABLE_STRIDE or int(lights["tri_count"][area].sum()) > TINY_LIGHT_TRIANGLES:
+        return f"the surface stage samples at most {TINY_LIGHT_TRIANGLES} light triangles"
+    tri = packed.arrays["triangles"][_light_triangles(packed)[0]]
+    _, ok = _library_normals(tri["p0"], tri["p1"], tri["p2"])
+    if not np.all(ok & (tri["normals"] < 0)):
+        return "the surface stage samples flat light triangles whose normals' library bits are known"
+    if int(params["integrator"]) != layout.INTEGRATORS["path"]:
+        return "the lanes stage is the path integrator's"
+    return None
+
+
+def _light_triangles(packed):
+    """The area lights' triangles in light order: (triangle rows, owning light, cdf, cdf before)."""
+    lights = packed.arrays["lights"]
+    cdf, rows = packed.arrays["light_tri_cdf"], packed.arrays["light_tris"]
+    out = [], [], [], []
+    for li, light in enumerate(lights):
+        if light["type"] != layout.LIGHT_TYPES["area"] or light["sphere"] >= 0:
+            continue
+        start, n = int(light["tri_start"]), int(light["tri_count"])
+        c = cdf[start:start + n]
+        out[0].extend(rows[start:start + n])
+        out[1].extend([li] * n)
+        out[2].extend(c)
+        out[3].extend(np.concatenate([[0.0], c[:-1]]))
+    return (np.asarray(out[0], np.int64), np.asarray(out[1], np.int32), np.asarray(out[2], np.float32),
+            np.asarray(out[3], np.float32))
+
+
+def lanes_table(packed, tiny: int = 0, spheres: int = 0, surface: bool = False) -> np.ndarray:
+    """The lights' and media's parameters the lanes stage reads (wavefront_state.h's table); with
+    `tiny` the scene's triangles and spheres in packet order (lanes_triangles.h), and with `surface`
+    the tested triangles' diffuse surfaces and the light triangles (wavefront_surface.cl)."""
     t = np.zeros((TABLE_ROWS, TABLE_STRIDE), np.float32)
-    tri = np.zeros((10, tiny, TRI_SPACING), np.float32)
+    tri = np.zeros((TRI_COORDS, tiny, TRI_SPACING), np.float32)
+    sph = np.zeros((SPHERE_COORDS, spheres, TRI_SPACING), np.float32)
     if tiny:
+        corners, codes = _tiny_triangles(packed, tiny)
+        tri[:9, :, 0] = corners.reshape(tiny, 9).T
+        tri[9, :, 0] = codes.astype(np.int32).view(np.float32)
+        if surface:
+            lanes, ng, bsdf = _lanes_surfaces(packed, corners, codes)
+            tri[10:13, :, 0] = ng.T
+            tri[13, :, 0] = np.abs(corners).max(axis=(1, 2))
+            tri[14, :, 0] = lanes
+            tri[15:18, :, 0] = bsdf["color"].T
+            tri[18, :, 0] = bsdf["twosided"] != 0
+    if spheres:
         leaves = packed.arrays["leaves"]
-        used = _used_lanes(leaves)
-        tri[:9, :, 0] = leaves["v"].transpose(1, 0, 2)[:, used]
-        tri[9, :, 0] = leaves["prim"][used].astype(np.int32).view(np.float32)
+        code = leaves["prim"][leaves["prim"] < 0]
+        rec = packed.arrays["spheres"][-code - 1]
+        sph[0:3, :, 0] = rec["center"].T
+        sph[3, :, 0] = rec["radius"]
+        sph[4, :, 0] = code.astype(np.int32).view(np.float32)
+    rows, owner, cdf, before = _light_triangles(packed) if surface else ((),) * 4
+    lt = np.zeros((LIGHT_TRI_COORDS, len(rows), TRI_SPACING), np.float32)
+    if len(rows):
+        ltri = packed.arrays["triangles"][rows]
+        ng, _ = _library_normals(ltri["p0"], ltri["p1"], ltri["p2"])
+        lt[0, :, 0] = owner.view(np.float32)
+        lt[1, :, 0] = cdf
+        lt[2, :, 0] = before
+        lt[3, :, 0] = np.r_[owner[1:] != owner[:-1], True]
+        lt[4:13, :, 0] = np.concatenate([ltri["p0"], ltri["p1"], ltri["p2"]], axis=1).T
+        lt[13:16, :, 0] = ng.T
     lights, media = packed.arrays["lights"], packed.arrays["media"]
     t[T_LIGHT_POS:T_LIGHT_POS + 3, :len(lights)] = lights["position"].T
     t[T_LIGHT_VALUE:T_LIGHT_VALUE + 3, :len(lights)] = lights["value"].T
@@ -133,7 +263,8 @@ def lanes_table(packed, tiny: int = 0) -> np.ndarray:
     t[T_ISO, :len(media)] = media["phase"] == layout.PHASE_TYPES["isotropic"]
     t[T_LANES, :len(media)] = (media["type"] == layout.MEDIUM_TYPES["homogeneous"]) & (t[T_ISO, :len(media)] + hg > 0)
     t[T_POINT, :len(lights)] = lights["type"] == layout.LIGHT_TYPES["point"]
-    return np.concatenate([t.reshape(-1), tri.reshape(-1)])
+    t[T_AREA, :len(lights)] = lights["area"]
+    return np.concatenate([t.reshape(-1), tri.reshape(-1), sph.reshape(-1), lt.reshape(-1)])
 
 
 class _DeviceState:
@@ -168,16 +299,21 @@ class Wavefront:
 
     def __init__(self, device, features: dict, packed, group_items: int, paths: int = PATHS, tiny: bool = True):
         self.device = device
-        self.tiny, ends = tiny_lanes(packed, features) if tiny else (0, 0)
-        extra = (f"-DVOLCL_WF_TINY={self.tiny}", f"-DVOLCL_WF_TINY_ENDS={ends}") if self.tiny else ()
+        # a scene without media is the surface stage's (supported() has checked that it can take it)
+        self.surface = not features.get("MEDIA")
+        self.tiny, ends, spheres = tiny_lanes(packed, features) if tiny or self.surface else (0, 0, 0)
+        light_tris = len(_light_triangles(packed)[0]) if self.surface else 0
+        extra = (f"-DVOLCL_WF_TINY={self.tiny}", f"-DVOLCL_WF_TINY_ENDS={ends}", f"-DVOLCL_WF_SPHERES={spheres}",
+                 f"-DVOLCL_WF_LIGHT_TRIS={light_tris}") if self.tiny else ()
         program = device.program(features, SCALAR_FILE, extra)
         self.scalar = cl.Kernel(program, "wavefront_scalar")
         self.add = cl.Kernel(program, "wavefront_add")
-        self.lanes = cl.Kernel(device.program(features, LANES_FILE, extra), "wavefront_medium")
+        lanes_file, kernel = (SURFACE_FILE, "wavefront_surface") if self.surface else (LANES_FILE, "wavefront_medium")
+        self.lanes = cl.Kernel(device.program(features, lanes_file, extra), kernel)
         self.group_items = group_items
         self.paths = -(-min(paths, STRIDE - 16) // group_items) * group_items
         self.table = cl.Buffer(device.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
-                               hostbuf=lanes_table(packed, self.tiny))
+                               hostbuf=lanes_table(packed, self.tiny, spheres, self.surface))
         self.results = None
         self.steps = 0          # stage pairs launched so far (benchmarks read it)
 

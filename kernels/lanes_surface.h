@@ -1,0 +1,146 @@
+/* The surface stage's routines on V3 (wavefront_surface.cl): each is the renderer's float3 routine
+ * it names, operation for operation, so that a path scatters from a diffuse triangle in the lanes as
+ * it does in the megakernel. The library's dot and cross take no fused multiply-adds (lanes_dot);
+ * the renderer's own float3 expressions contract as the same expressions on scalars do. */
+#ifndef VOLCL_LANES_SURFACE_H
+#define VOLCL_LANES_SURFACE_H
+
+#define LT(c, j) table[WF_LT_AT(c, j)]
+
+/* A tested triangle's numbers (wavefront_state.h WF_TRI_AT) */
+typedef struct {
+    V3 p0, p1, p2, ng, color;
+    float mag, lanes, twosided;
+} LanesTriangle;
+
+/* Triangle `slot` of the table (zeros for -1): a select per triangle and number, which cost less
+ * than a gather per number (89 against 66 ns a path for the surface stage on PoCL; 38 against 42
+ * on Intel's runtime) */
+inline LanesTriangle lanes_triangle_at(__global const float *table, int slot) {
+    LanesTriangle t;
+    t.p0 = t.p1 = t.p2 = t.ng = t.color = v3(0.0f, 0.0f, 0.0f);
+    t.mag = t.lanes = t.twosided = 0.0f;
+#define TV(c) table[WF_TRI_AT(c, k)]
+#pragma unroll
+    for (int k = 0; k < VOLCL_WF_TINY; ++k) {
+        bool is_k = slot == k;
+        t.p0 = v3_sel(is_k, v3(TV(0), TV(1), TV(2)), t.p0);
+        t.p1 = v3_sel(is_k, v3(TV(3), TV(4), TV(5)), t.p1);
+        t.p2 = v3_sel(is_k, v3(TV(6), TV(7), TV(8)), t.p2);
+        t.ng = v3_sel(is_k, v3(TV(WF_TRI_NG), TV(WF_TRI_NG + 1), TV(WF_TRI_NG + 2)), t.ng);
+        t.color = v3_sel(is_k, v3(TV(WF_TRI_COLOR), TV(WF_TRI_COLOR + 1), TV(WF_TRI_COLOR + 2)), t.color);
+        t.mag = is_k ? TV(WF_TRI_MAG) : t.mag;
+        t.lanes = is_k ? TV(WF_TRI_LANES) : t.lanes;
+        t.twosided = is_k ? TV(WF_TRI_TWOSIDED) : t.twosided;
+    }
+#undef TV
+    return t;
+}
+
+/* surface_point (surface.h) on a triangle: the barycentric point pulled a hair into it */
+inline V3 lanes_surface_point(const LanesTriangle *t, float hit_b1, float hit_b2) {
+    float b1 = fmax(hit_b1, 1e-5f), b2 = fmax(hit_b2, 1e-5f), b0 = fmax(1.0f - hit_b1 - hit_b2, 1e-5f);
+    float inv_sum = 1.0f / (b0 + b1 + b2);
+    b0 *= inv_sum;
+    b1 *= inv_sum;
+    b2 *= inv_sum;
+    return v3(b0 * t->p0.x + b1 * t->p1.x + b2 * t->p2.x, b0 * t->p0.y + b1 * t->p1.y + b2 * t->p2.y,
+              b0 * t->p0.z + b1 * t->p1.z + b2 * t->p2.z);
+}
+
+/* make_frame (common.h) */
+inline void lanes_make_frame(V3 n, V3 *s, V3 *t) {
+    float sign = copysign(1.0f, n.z);
+    float a = -1.0f / (sign + n.z);
+    float b = n.x * n.y * a;
+    *s = v3(1.0f + sign * n.x * n.x * a, sign * b, -sign * n.x);
+    *t = v3(b, sign + n.y * n.y * a, -n.y);
+}
+
+/* frame_to_local and frame_to_world (common.h) */
+inline V3 lanes_to_local(V3 v, V3 s, V3 t, V3 n) { return v3(lanes_dot(v, s), lanes_dot(v, t), lanes_dot(v, n)); }
+
+inline V3 lanes_to_world(V3 v, V3 s, V3 t, V3 n) {
+    return v3(v.x * s.x + v.y * t.x + v.z * n.x, v.x * s.y + v.y * t.y + v.z * n.y, v.x * s.z + v.y * t.z + v.z * n.z);
+}
+
+/* sample_cosine_hemisphere (sampling.h): the concentric disk's two cases as selects */
+inline V3 lanes_cosine_hemisphere(float u0, float u1) {
+    float ox = 2.0f * u0 - 1.0f, oy = 2.0f * u1 - 1.0f;
+    /* |o| two ways: two fabs side by side were packed into a <2 x float> (lanes.h) */
+    bool wide = fabs(ox) > (oy < 0.0f ? -oy : oy);
+    float r = wide ? ox : oy;
+    float a = (VOLCL_PI / 4.0f) * ((wide ? oy : ox) / r);
+    float c = cos_small(a), s = sin_small(a);
+    bool centre = (ox == 0.0f) & (oy == 0.0f);
+    float dx = centre ? 0.0f : r * (wide ? c : s), dy = centre ? 0.0f : r * (wide ? s : c);
+    return v3(dx, dy, sqrt(fmax(0.0f, 1.0f - dx * dx - dy * dy)));
+}
+
+/* offset_origin (common.h) */
+inline V3 lanes_offset_origin(V3 p, float mag, V3 ng, V3 d) {
+    /* |p| three ways (see lanes_cosine_hemisphere) */
+    mag = fmax(mag, fmax(fmax(fabs(p.x), p.y < 0.0f ? -p.y : p.y), fmax(p.z, -p.z)));
+    float eps = mag * 1e-5f;
+    return v3_madd(p, lanes_dot(d, ng) > 0.0f ? eps : -eps, ng);
+}
+
+/* offset_back (common.h) */
+inline float lanes_offset_back(V3 o, V3 p, V3 ng, V3 d) {
+    float den = lanes_dot(d, ng);
+    return fabs(lanes_dot(v3_sub(o, p), ng)) / fmax(den < 0.0f ? -den : den, 1.0f / 16.0f);
+}
+
+/* power_heuristic (common.h) */
+inline float lanes_power_heuristic(float pdf_a, float pdf_b) {
+    float a = pdf_a * pdf_a, b = pdf_b * pdf_b;
+    return isinf(a) ? (isinf(b) ? 0.5f : 1.0f) : (a + b > 0.0f ? a / (a + b) : 0.0f);
+}
+
+typedef struct {
+    V3 wi, value;
+    float dist, pdf;
+    bool delta;
+} LanesLight;
+
+/* light_sample (lights.h) for point lights and area lights on triangles, light `li` of `count`
+ * (picked by the caller as light_sample picks it): whether it gives a sample. The area light's
+ * triangle is sample_discrete_cdf's (the first of its triangles whose cdf passes ux, else its last),
+ * found by a pass over every light triangle of the table. */
+inline bool lanes_light_sample(__global const float *table, V3 ref, int li, int count, float ux, float uy,
+                               LanesLight *ls) {
+    float choice = 1.0f / (float)count;
+    bool point = TROW(WF_T_POINT, li) > 0.0f;
+    bool found = false;
+    float lo = 0.0f, hi = 1.0f;
+    V3 p0 = v3(0.0f, 0.0f, 0.0f), p1 = p0, p2 = p0, ng = p0;
+#pragma unroll
+    for (int j = 0; j < VOLCL_WF_LIGHT_TRIS; ++j) {
+        bool take = !found & (as_int(LT(WF_LT_LIGHT, j)) == li) & ((LT(WF_LT_CDF, j) > ux) | (LT(WF_LT_LAST, j) > 0.0f));
+        lo = take ? LT(WF_LT_BEFORE, j) : lo;
+        hi = take ? LT(WF_LT_CDF, j) : hi;
+        p0 = v3_sel(take, v3(LT(WF_LT_P, j), LT(WF_LT_P + 1, j), LT(WF_LT_P + 2, j)), p0);
+        p1 = v3_sel(take, v3(LT(WF_LT_P + 3, j), LT(WF_LT_P + 4, j), LT(WF_LT_P + 5, j)), p1);
+        p2 = v3_sel(take, v3(LT(WF_LT_P + 6, j), LT(WF_LT_P + 7, j), LT(WF_LT_P + 8, j)), p2);
+        ng = v3_sel(take, v3(LT(WF_LT_NG, j), LT(WF_LT_NG + 1, j), LT(WF_LT_NG + 2, j)), ng);
+        found = found | take;
+    }
+    float u = clamp((ux - lo) / fmax(hi - lo, 1e-30f), 0.0f, 0.99999994f);
+    float su = sqrt(u);
+    float bx = 1.0f - su, by = uy * su;
+    float w0 = 1.0f - bx - by;
+    V3 pa = v3(w0 * p0.x + bx * p1.x + by * p2.x, w0 * p0.y + bx * p1.y + by * p2.y, w0 * p0.z + bx * p1.z + by * p2.z);
+    V3 v = v3_sel(point, v3_sub(trow3(table, WF_T_LIGHT_POS, li), ref), v3_sub(pa, ref));
+    float d2 = lanes_dot(v, v);
+    ls->dist = sqrt(d2);
+    ls->wi = lanes_div(v, ls->dist);
+    V3 lv = trow3(table, WF_T_LIGHT_VALUE, li);
+    bool facing = lanes_dot(ng, v3(-ls->wi.x, -ls->wi.y, -ls->wi.z)) > 0.0f;
+    float cos_l = fabs(lanes_dot(ng, ls->wi));
+    ls->value = v3_sel(point, lanes_div(lv, d2), v3_sel(facing, lv, v3(0.0f, 0.0f, 0.0f)));
+    ls->pdf = point ? choice : choice * d2 / (cos_l * TROW(WF_T_AREA, li));
+    ls->delta = point;
+    return (d2 > 0.0f) & (point | (cos_l > 0.0f));
+}
+
+#endif
