@@ -197,6 +197,14 @@ VOLCL_KERNEL void wavefront_scalar(VOLCL_SCENE_ARGS,
     IROW(WF_CUTOFFS) = (int)cut;
 }
 
+/* The start of a run: paths 0 to n - 1 alive, each about to take its first job. */
+VOLCL_KERNEL void wavefront_begin(__global int *is, int n) {
+    int i = (int)get_global_id(0);
+    if (i >= n) return;
+    IROW(WF_FLAGS) = (int)WF_FLAG_ALIVE;
+    IROW(WF_EVENT) = WF_EV_START;
+}
+
 /* Every work-item's samples from `results` into its accumulator entry, in render_pass's order. */
 VOLCL_KERNEL void wavefront_add(__global const float4 *results, __global float4 *sums, __global float4 *sums_sq,
                                 __global uint *invalid, __global uint *cutoffs, int tile_pixels, int first,

@@ -17,7 +17,9 @@
  * Built as its own program, every function inlined (the pragma below marks every function declared
  * up to the kernel always_inline): LLVM's loop vectorizer (PoCL) stops at a call left out of line,
  * and the renderer's helpers used here are plain `inline`. */
+#ifdef __OPTIMIZE__     /* (forced inlining at -O0 leaves calls Oclgrind cannot run: surface.h) */
 #pragma clang attribute push (__attribute__((always_inline)), apply_to = function)
+#endif
 #include "renderer.h"
 #include "lanes.h"
 #include "wavefront_state.h"
@@ -58,7 +60,9 @@ inline float lanes_distance_pdf(V3 sigma_t, V3 beta, V3 tr) {
 #endif
 }
 
+#ifdef __OPTIMIZE__
 #pragma clang attribute pop
+#endif
 
 /* No bounds test: the host launches whole work-groups over the wave (a store under a condition would
  * stop the vectorizer); paths past the wave's end are never alive. */

@@ -9,14 +9,18 @@
  * emitters) and every miss goes to the scalar stage as PATH_SURFACE, with the hit's rows.
  *
  * Built as its own program, every function inlined, as wavefront_lanes.cl is. */
+#ifdef __OPTIMIZE__     /* (forced inlining at -O0 leaves calls Oclgrind cannot run: surface.h) */
 #pragma clang attribute push (__attribute__((always_inline)), apply_to = function)
+#endif
 #include "renderer.h"
 #include "lanes.h"
 #include "wavefront_state.h"
 #include "lanes_rows.h"
 #include "lanes_triangles.h"
 #include "lanes_surface.h"
+#ifdef __OPTIMIZE__
 #pragma clang attribute pop
+#endif
 
 /* No bounds test: the host launches whole work-groups over the wave; paths past the wave's end are
  * never alive. */

@@ -14,7 +14,7 @@ sys.path[:0] = [str(HERE), str(HERE.parent)]
 
 from scenebuild import (camera, constant_env, diffuse, furnace, look_at, medium, quad_mesh,  # noqa: E402
                         scene, sphere)
-from volcl import device as devmod  # noqa: E402
+from volcl import device as devmod, wavefront  # noqa: E402
 from volcl.features import all_features  # noqa: E402
 from volcl.renderer import Renderer  # noqa: E402
 from volcl.scene import load  # noqa: E402
@@ -122,6 +122,28 @@ def phase_blends():
     return furnace(0.5, medium=fog)
 
 
+# the wavefront renderer's two lanes stages (which "auto" takes on CPUs only): the floor, the panel
+# light, a point light and a glass sphere, for the stages' table reads (triangles, spheres, light
+# triangles) and the path rows; few triangles and bounces, since every step is two launches of
+# kernels that test every primitive for every path, which the simulator takes long over
+WAVEFRONT_BODY = (SENSOR.format(kind="perspective", extra='<float name="fov" value="45"/>{medium}') + ROOM
+                  + '<emitter type="point"><point name="position" value="-1, 1, 1"/><rgb name="intensity" value="2"/>'
+                  '</emitter><shape type="sphere"><float name="radius" value="0.4"/><bsdf type="dielectric"/></shape>')
+WAVEFRONT_SURFACE = mitsuba('<integrator type="path"><integer name="max_depth" value="4"/></integrator>'
+                            + WAVEFRONT_BODY.format(medium=""))
+WAVEFRONT_MEDIUM = mitsuba('<integrator type="volpath"><integer name="max_depth" value="4"/></integrator>'
+                           '<medium type="homogeneous" id="fog"><rgb name="sigma_t" value="0.3"/>'
+                           '<rgb name="albedo" value="0.8"/></medium>' + WAVEFRONT_BODY.format(medium='<ref id="fog"/>'))
+
+
+def wavefront_surface_stage():
+    return WAVEFRONT_SURFACE(), None, "wavefront"
+
+
+def wavefront_medium_stage():
+    return WAVEFRONT_MEDIUM(), None, "wavefront"
+
+
 def every_feature():
     """The fog scene on the program with every feature compiled in."""
     return load(SCENES / "fog.xml"), all_features()
@@ -151,16 +173,21 @@ FAMILIES = {
     "rough_glass_textures": shipped("rough_glass_medium"),   # roughdielectric, checkerboard, envmap
     "rough_bsdfs_bitmaps_bump_maps": shipped("textured_cbox"),  # roughconductor/plastic, bitmaps, bump and normal maps
     "every_feature": every_feature,
+    "wavefront_surface_stage": wavefront_surface_stage,
+    "wavefront_medium_stage": wavefront_medium_stage,
 }
 
 
 def main(family, size=8, spp=1):
     made = FAMILIES[family]()
-    sc, features = made if isinstance(made, tuple) else (made, None)
+    sc, features, engine = (made + ("megakernel",))[:3] if isinstance(made, tuple) else (made, None, "megakernel")
     sc.camera.width = sc.camera.height = size
     devices = devmod.list_devices()
     assert len(devices) == 1, f"expected only the simulated device, found {[d.name for d in devices]}"
-    r = Renderer(sc, device=devices[0], features=features, seed=5)
+    r = Renderer(sc, device=devices[0], features=features, seed=5, engine="megakernel")
+    if engine == "wavefront":
+        # (the simulated device is not a CPU, which the wavefront renderer asks for, but runs it)
+        r.wavefront = wavefront.Wavefront(r.device, r.features, r.packed, r.group_items)
     res = r.render(spp)
     print(f"{family}: {res.device}, {size}x{size}, {spp} spp, invalid {res.invalid}, "
           f"mean {res.image.mean():.4g}")

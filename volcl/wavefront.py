@@ -37,14 +37,12 @@ from .opencl import cl
 from .pack import ARG_ORDER
 
 # kernels/wavefront_state.h: rows of the state arrays, their stride, the flag that a path is alive,
-# the event of a path about to start a sample, and the lanes stage's table of lights and media
+# and the lanes stage's table of lights and media
 FLOAT_ROWS = 42
 INT_ROWS = 13
 STRIDE = 65552                  # at most STRIDE - 16 paths in flight (wavefront_state.h)
 ROW_FLAGS = 2
-ROW_EVENT = 5
 FLAG_ALIVE = 1
-EVENT_START = 17
 TABLE_STRIDE = 64
 TABLE_ROWS = 17
 T_LIGHT_POS, T_LIGHT_VALUE, T_SIGMA_T, T_ALBEDO, T_G, T_ISO, T_LANES, T_POINT, T_AREA = 0, 3, 6, 9, 12, 13, 14, 15, 16
@@ -308,6 +306,7 @@ class Wavefront:
         program = device.program(features, SCALAR_FILE, extra)
         self.scalar = cl.Kernel(program, "wavefront_scalar")
         self.add = cl.Kernel(program, "wavefront_add")
+        self.begin = cl.Kernel(program, "wavefront_begin")
         lanes_file, kernel = (SURFACE_FILE, "wavefront_surface") if self.surface else (LANES_FILE, "wavefront_medium")
         self.lanes = cl.Kernel(device.program(features, lanes_file, extra), kernel)
         self.group_items = group_items
@@ -332,16 +331,14 @@ class Wavefront:
         if self.results is None or self.results.size < 16 * jobs:
             self.results = cl.Buffer(self.device.ctx, cl.mem_flags.READ_WRITE, 16 * jobs)
         n = min(self.paths, -(-jobs // self.group_items) * self.group_items)
-        ints = np.zeros((2, n), np.int32)
-        ints[0] = FLAG_ALIVE
-        ints[1] = EVENT_START
-        for k, row in enumerate((ROW_FLAGS, ROW_EVENT)):
-            cl.enqueue_copy(queue, state.is_, ints[k], dst_offset=4 * row * STRIDE)
+        size, local = (n,), (self.group_items,)
+        # every path alive, about to take a job (a kernel writes the rows: Oclgrind 21.10 does not
+        # count a host write at an offset into a buffer as initializing it)
+        self.begin(queue, size, local, state.is_, np.int32(n))
         cl.enqueue_copy(queue, state.next_job, np.zeros(1, np.int32))
         params = dict(zip(ARG_ORDER, scene_args))["params"]
         self.lanes.set_args(state.fs, state.is_, self.table, params)
         self.scalar.set_args(*scene_args, self.results, state.next_job, *launch_args, state.fs, state.is_)
-        size, local = (n,), (self.group_items,)
         # the paths' flags after each batch of steps, read without waiting: the host looks at the
         # last batch's while the device runs the next (one batch of finished paths at the end is
         # the price; waiting for every read left the device idle between batches)
