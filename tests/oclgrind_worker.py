@@ -186,7 +186,11 @@ def main(family, size=8, spp=1):
     assert len(devices) == 1, f"expected only the simulated device, found {[d.name for d in devices]}"
     r = Renderer(sc, device=devices[0], features=features, seed=5, engine="megakernel")
     if engine == "wavefront":
-        # (the simulated device is not a CPU, which the wavefront renderer asks for, but runs it)
+        # (the simulated device is not a CPU, which the wavefront renderer asks for, but runs it);
+        # a look at the paths' flags after every step, not every 8: each launch takes the simulator
+        # about a second, and the steps past the last path's end took most of the time (50 s
+        # against 12 s for the surface stage's family)
+        wavefront.CHECK_EVERY = 1
         r.wavefront = wavefront.Wavefront(r.device, r.features, r.packed, r.group_items)
     res = r.render(spp)
     print(f"{family}: {res.device}, {size}x{size}, {spp} spp, invalid {res.invalid}, "
