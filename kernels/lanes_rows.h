@@ -7,6 +7,10 @@
 #define IROW(r) is[WF_AT(r)]
 #define TROW(r, k) table[(r) * WF_TABLE_STRIDE + (k)]
 
+/* whether a lanes stage takes the path this step: its ray was just traced, or the lanes stage took
+ * its last step too */
+inline bool lanes_pending(int event) { return (event == WF_EV_MEDIUM) | (event == WF_EV_NEXT); }
+
 inline V3 frow3(__global const float *fs, int r, int i) { return v3(FROW(r), FROW(r + 1), FROW(r + 2)); }
 
 inline V3 trow3(__global const float *table, int r, int k) { return v3(TROW(r, k), TROW(r + 1, k), TROW(r + 2, k)); }

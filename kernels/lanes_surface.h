@@ -57,9 +57,7 @@ inline void lanes_make_frame(V3 n, V3 *s, V3 *t) {
     *t = v3(b, sign + n.y * n.y * a, -n.y);
 }
 
-/* frame_to_local and frame_to_world (common.h) */
-inline V3 lanes_to_local(V3 v, V3 s, V3 t, V3 n) { return v3(lanes_dot(v, s), lanes_dot(v, t), lanes_dot(v, n)); }
-
+/* frame_to_world (common.h) */
 inline V3 lanes_to_world(V3 v, V3 s, V3 t, V3 n) {
     return v3(v.x * s.x + v.y * t.x + v.z * n.x, v.x * s.y + v.y * t.y + v.z * n.y, v.x * s.z + v.y * t.z + v.z * n.z);
 }

@@ -71,7 +71,7 @@ __kernel void wavefront_medium(__global float *fs, __global int *is, __global co
     int i = (int)get_global_id(0);
     int event = IROW(WF_EVENT), mi = IROW(WF_MEDIUM), depth = IROW(WF_DEPTH);
     uint flags = (uint)IROW(WF_FLAGS);
-    bool pending = (event == WF_EV_MEDIUM) | (event == WF_EV_NEXT);
+    bool pending = lanes_pending(event);
     int mk = max(mi, 0);
     bool run = pending & (mi >= 0) & (TROW(WF_T_LANES, mk) > 0.0f);
     bool do_nee = (flags & WF_FLAG_DO_NEE) != 0u;

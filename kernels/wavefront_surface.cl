@@ -29,7 +29,7 @@ __kernel void wavefront_surface(__global float *fs, __global int *is, __global c
     int i = (int)get_global_id(0);
     int event = IROW(WF_EVENT), depth = IROW(WF_DEPTH);
     uint flags = (uint)IROW(WF_FLAGS);
-    bool pending = (event == WF_EV_MEDIUM) | (event == WF_EV_NEXT);
+    bool pending = lanes_pending(event);
     V3 o = frow3(fs, WF_O, i), d = frow3(fs, WF_D, i), beta = frow3(fs, WF_BETA, i), L = frow3(fs, WF_L, i);
     float hit_t, hit_b1, hit_b2;
     int hit_prim, slot;

@@ -325,8 +325,7 @@ def test_which_scenes_the_surface_stage_takes(device, change, why):
         text = text.replace("<sampler", '<ref id="m"/><sampler').replace('type="path"', 'type="volpath"')
     else:
         text = text.replace("</scene>", change + "</scene>")
-    r = Renderer(volcl.load_string(text, base_dir=SCENES, width=8, height=8), device=device, engine="megakernel")
-    reason = wavefront.surface_lanes(r.packed, r.features, r.params)
+    reason = wavefront.surface_lanes(*_packed(device, volcl.load_string(text, base_dir=SCENES, width=8, height=8)))
     if why is None:
         assert reason == "the surface stage is for scenes without media"
     else:

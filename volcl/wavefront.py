@@ -97,9 +97,7 @@ def pays(features: dict, packed, params, device) -> bool:
       point_in_fog: 1.84x the megakernel's speed on PoCL and 2.25x on Intel's runtime (tested
       whole, tiny_lanes; 1.03-1.26x and 1.22-1.48x through the BVH); scenes with area or
       environment lights, or the camera outside the medium, 0.45x-0.83x;
-    - without media (the surface stage), on Intel's CPU runtime only: cbox 1.19x the megakernel's
-      speed there, 0.78x on PoCL (whose vectorized stage runs 8 lanes and took twice Intel's time
-      a path)."""
+    - without media (the surface stage), where surface_stage_pays() says so."""
     lights = packed.arrays["lights"]
     if not features.get("MEDIA"):
         return surface_stage_pays(device)
@@ -110,7 +108,8 @@ def pays(features: dict, packed, params, device) -> bool:
 
 def surface_stage_pays(device) -> bool:
     """Whether "auto" takes the surface stage on this device (where surface_lanes() takes the
-    scene): on Intel's CPU runtime (cbox 1.21x the megakernel's speed), not on PoCL (0.80x)."""
+    scene): on Intel's CPU runtime (cbox 1.12-1.21x the megakernel's speed), not on PoCL
+    (0.72-0.80x: its vectorized stage runs 8 lanes and took about twice Intel's time a path)."""
     return device.kind == "cpu" and "intel" in device.platform_name.lower()
 
 
