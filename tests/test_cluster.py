@@ -127,9 +127,36 @@ def test_a_worker_killed_mid_render_loses_nothing(client, device):
             os.kill(pids[victim], signal.SIGKILL)
             seen["killed"] = True
     r.on_tile = tile_done
-    result = r.render(60)
+    try:
+        result = r.render(60)
+    finally:
+        client.wait_for_workers(2, timeout=120)     # the nanny brings the worker back
     assert seen["killed"] and same(result, local)
-    client.wait_for_workers(2, timeout=120)         # the nanny brings the worker back
+
+
+def test_every_worker_killed_mid_render_loses_nothing(client, device):
+    """SIGKILL to both worker processes in the second round: the scene's copies on the workers die
+    with them (Dask cannot recompute data the client scattered), so the render sends it again to
+    the workers the nannies start, and the image is the local one, bit for bit."""
+    scene = volcl.load_file(SCENES / "fog.xml", **SIZE)
+    local = volcl.render(scene, spp=40, seed=5, device=device)
+    pids = client.run(os.getpid)
+    r = on_cluster(scene, client, seed=5)
+    seen = {"tiles": 0}
+
+    def tile_done(job):
+        seen["tiles"] += 1
+        if seen["tiles"] == len(r.tile_list) + 1:
+            for pid in pids.values():
+                os.kill(pid, signal.SIGKILL)
+    r.on_tile = tile_done
+    try:
+        result = r.render(40)
+    finally:
+        client.wait_for_workers(2, timeout=120)
+    assert set(client.run(os.getpid).values()).isdisjoint(pids.values())
+    assert same(result, local) and result.complete
+    assert result.info["failures"] == [("scene", "every worker holding a copy died (sent again)")]
 
 
 def fail_on_workers(client, tile, from_spp, others_wait=0.0):
@@ -167,6 +194,7 @@ def test_a_task_failing_on_every_try_stops_the_render_with_its_last_whole_round(
     are still rendering the rounds before it when it fails: they finish and are merged); the batch
     renderer writes that image and a checkpoint, and --resume continues to the bits of a whole
     render."""
+    client.wait_for_workers(2, timeout=120)         # every worker gets the injected failure
     scene = volcl.load_file(SCENES / "fog.xml", **SIZE)
     r = on_cluster(scene, client, seed=7)           # rounds: one pass of the slots, then 1 spp each
     done = r.slots + 2

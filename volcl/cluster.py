@@ -16,7 +16,8 @@ a render whose task fails on every try keeps (WorkersFailed.result).
 
 - The scene travels once per worker: the client scatters the volcl.Scene (its model and packed
   arrays, meshes, volumes and textures included, so files that exist only on the client are
-  never read by a worker) to every worker, and tasks refer to it.
+  never read by a worker) to every worker, and tasks refer to it; if every worker holding a copy
+  dies, the client sends it again (DaskExecutor.resend).
 - Each worker thread renders on a volcl device of its own process (volcl.cluster.worker_device:
   the worker's VOLCL_DEVICE, else the device volcl chooses; threads share a device when there
   are more threads than devices), whose program is built once per worker process and kept.
@@ -68,6 +69,9 @@ TASK_RETRIES = 2
 LOOKAHEAD = 2
 # The render's last rounds are at least this many times shorter than a round (volcl.cluster._Stream).
 TAIL_SPLIT = 8
+# Times one executor sends the scene again after the workers lost every copy of it (each worker
+# that held one died) before the render fails.
+SCENE_RESENDS = 3
 # How long the client tries to reach a scheduler at an address.
 CONNECT_SECONDS = 30.0
 # How long a render waits for a first worker to join a scheduler that has none.
@@ -215,12 +219,16 @@ def _tile_renderer(scene, spec, tile, start=0):
     """A Renderer of `tile` on this thread's device. The thread keeps the renderers of the tiles it
     rendered for the scene it rendered last: when the tile comes back at the sample count it left
     with, its accumulators are already on the device (the state the task carries is then not
-    uploaded again); the samples done tell whether they are."""
+    uploaded again); the samples done tell whether they are. The scene is known by the name the
+    client gave it (spec["scene"]), not by the object: Dask may drop a worker's copy of the scene
+    between tasks and fetch it again (its active memory manager keeps one copy of data no queued
+    task needs), and the copy is the same scene."""
     from .renderer import Renderer
-    key = (id(scene), scene.version, repr(spec), tile)
+    name = (spec.get("scene"), scene.version)
+    key = (name, repr(spec), tile)
     cache = getattr(_local, "renderers", None)
-    if cache is None or cache.get("scene") != (id(scene), scene.version):
-        cache = _local.renderers = {"scene": (id(scene), scene.version)}
+    if cache is None or cache.get("scene") != name:
+        cache = _local.renderers = {"scene": name}
     # Taken out of the cache while the task runs, and put back by tile_round once it has
     # succeeded: a task that fails mid-pass leaves accumulators no retry may start from.
     r = cache.pop(key, None)
@@ -278,6 +286,9 @@ class DaskExecutor:
         self.client = client
         self.failures: list = []
         self._scene = None          # the scene's future on the workers
+        self._prepared = None       # the scene itself, sent again if the workers lose every copy
+        self._prepares = 0
+        self._resends = 0
         self._spec = None
         self._labels: list = []
         self._renders = 0
@@ -302,7 +313,10 @@ class DaskExecutor:
     def prepare(self, render: TiledRender):
         """Scatter the scene to every worker (once), build the program and upload there."""
         wait_for_workers(self.client)
-        self._spec = {"features": render.feature_override, "seed": render.seed, "estimator": render.estimator}
+        self._prepares += 1
+        self._spec = {"features": render.feature_override, "seed": render.seed, "estimator": render.estimator,
+                      "scene": f"{self._id}-{self._prepares}"}
+        self._prepared = render.prepared
         self._scene = self.client.scatter(render.prepared, broadcast=True, hash=False)
         futures = [self.client.submit(warm, self._scene, self._spec, workers=[addr], pure=False,
                                       key=f"{self._id}-warm-{i}")
@@ -334,7 +348,27 @@ class DaskExecutor:
         finally:
             run.cancel()
 
+    def scene_lost(self) -> bool:
+        """Whether the workers hold no copy of the scene (each worker that had one has died: the client
+        scattered it, so Dask cannot compute it again, and the tasks that need it are cancelled)."""
+        if self._scene.status != "finished":
+            return True
+        return not self.client.who_has([self._scene]).get(self._scene.key)
+
+    def resend(self):
+        """Scatter the scene again (to the workers the nannies restarted, or any that joined), under a
+        new key, once per loss; WorkersFailed after SCENE_RESENDS losses in one executor."""
+        if self._resends >= SCENE_RESENDS:
+            raise WorkersFailed(f"the workers lost every copy of the scene {self._resends + 1} times; "
+                                "giving up (are they running out of memory? see their logs)")
+        self._resends += 1
+        self.failures.append(("scene", "every worker holding a copy died (sent again)"))
+        wait_for_workers(self.client)
+        self._scene.release()
+        self._scene = self.client.scatter(self._prepared, broadcast=True, hash=False)
+
     def close(self):
+        self._prepared = None
         if self._scene is not None:
             self._scene.release()
             self._scene = None
@@ -417,7 +451,8 @@ class _Stream:
         state = None if job.start == 0 else (self.render.tile_state(i) if k == self.merged
                                              else self.held[k - 1][i].out)
         f = self.ex.client.submit(tile_round, self.ex._scene, self.ex._spec, job.tile, state, count,
-                                  key=f"{self.key}-r{k}-t{i}", pure=False, retries=TASK_RETRIES, priority=-k)
+                                  key=f"{self.prefix()}r{k}-t{i}", pure=False,
+                                  retries=TASK_RETRIES, priority=-k)
         job.round = k
         self.jobs[f] = job
         self.ac.add(f)
@@ -427,6 +462,9 @@ class _Stream:
             self.submit(i, 0)
         for f, out in self.ac:
             job = self.jobs.pop(f)
+            if f.status == "cancelled" and self.scene_lost(f):
+                self.submit(job.index, job.round)       # a new task, on the scene sent again
+                continue
             if f.status in ("error", "cancelled"):
                 self.failed(f, job, out)
                 if self.merged >= self.broken:
@@ -452,6 +490,20 @@ class _Stream:
         if self.error is not None:
             raise self.error
         return "spp"
+
+    def scene_lost(self, f) -> bool:
+        """Whether cancelled task `f` was cancelled because the scene it needs was lost; if so, the
+        scene is sent again (once: the other tasks cancelled with it find it sent)."""
+        if not f.key.startswith(self.prefix()):        # submitted before the scene was sent again
+            return True
+        if self.ex.scene_lost():
+            self.ex.resend()
+            return True
+        return False
+
+    def prefix(self) -> str:
+        """The keys of the tasks that need the scene as last sent."""
+        return f"{self.key}-s{self.ex._resends}-"
 
     def merge(self, progress) -> str | None:
         """The image's next round, which every tile has; the rules' reason to stop, if any."""
