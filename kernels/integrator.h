@@ -388,8 +388,10 @@ inline int path_medium_event(const SceneData *sc, Rng *rng, PathState *ps, bool 
     /* the segment starts at the surface the ray left, t_back behind the offset origin */
     float3 seg_o = ps->o - ps->t_back * ps->d;
     float seg_t = (hit ? h->t : ps->t_max) + ps->t_back;
+    /* in a sealed medium every shadow ray ends on the surface around it: no NEE (volcl/sealed.py) */
+    bool do_nee = ps->do_nee && !m->sealed;
 #if VOLCL_HAS_EQUIANGULAR
-    EquiangularSegmentState es = equiangular_begin(sc, rng, m, seg_o, ps->d, seg_t, ps->beta, ps->depth, ps->do_nee);
+    EquiangularSegmentState es = equiangular_begin(sc, rng, m, seg_o, ps->d, seg_t, ps->beta, ps->depth, do_nee);
     ps->L += ps->beta * equiangular_direct(sc, rng, &es, m, ps->medium, cutoffs);
 #endif
     EmissionMis em;
@@ -418,7 +420,7 @@ inline int path_medium_event(const SceneData *sc, Rng *rng, PathState *ps, bool 
     if (rp->max_depth >= 0 && ps->depth + 1 >= rp->max_depth) return PATH_END;
     if (max_component(ps->beta) <= 0.0f) return PATH_END;
     /* next-event estimation, MIS against phase sampling */
-    if (ps->do_nee) {
+    if (do_nee) {
         LightSample ls;
         float u_pick = rng_next_float(rng);
         float2 ul = rng_next_float2(rng);

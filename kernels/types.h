@@ -267,7 +267,8 @@ typedef struct {
     float temperature_scale;
     float temperature_offset;
     int emission_sampler;   /* emission NEE: offset of the medium's EmissionSampler words, or -1 */
-    int pad0;
+    int sealed;             /* 1: inside a closed surface that stops shadow rays, no light inside:
+                             * NEE from it always adds 0 and is skipped (volcl/sealed.py) */
 } Medium;
 
 #define EMISSION_CONSTANT 0     /* emission[] alone (or nothing) */

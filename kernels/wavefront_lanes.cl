@@ -74,7 +74,8 @@ __kernel void wavefront_medium(__global float *fs, __global int *is, __global co
     bool pending = lanes_pending(event);
     int mk = max(mi, 0);
     bool run = pending & (mi >= 0) & (TROW(WF_T_LANES, mk) > 0.0f);
-    bool do_nee = (flags & WF_FLAG_DO_NEE) != 0u;
+    /* in a sealed medium every shadow ray ends on the surface around it: no NEE (volcl/sealed.py) */
+    bool do_nee = ((flags & WF_FLAG_DO_NEE) != 0u) & !(TROW(WF_T_SEALED, mk) > 0.0f);
     V3 o = frow3(fs, WF_O, i), d = frow3(fs, WF_D, i), beta = frow3(fs, WF_BETA, i);
     float t_back = FROW(WF_T_BACK);
 #if VOLCL_WF_TINY

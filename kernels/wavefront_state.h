@@ -36,7 +36,8 @@
 #define WF_T_LANES 14           /* 1 where the lanes stage handles the medium (homogeneous), else 0 */
 #define WF_T_POINT 15           /* 1 for a point light, which the lanes stage samples itself, else 0 */
 #define WF_T_AREA 16            /* an area light's area */
-#define WF_TABLE_ROWS 17
+#define WF_T_SEALED 17          /* 1 for a sealed medium (Medium.sealed: no NEE from it), else 0 */
+#define WF_TABLE_ROWS 18
 /* then a tiny scene's triangle lanes (lanes_triangles.h): coordinate c of lane k, every number a
  * cache line from the next (neighbouring words were packed into vectors again). Coordinates: p0
  * xyz, p1 xyz, p2 xyz, the primitive code's int bits; for the surface stage (wavefront_surface.cl)

@@ -132,7 +132,7 @@ MEDIUM = np.dtype([
     ("emission", *f3), ("phase_lobe_count", np.int32),
     ("emission_mode", np.int32), ("emission_grid", np.int32), ("emission_scale", np.float32),
     ("blackbody", np.int32), ("temperature_scale", np.float32), ("temperature_offset", np.float32),
-    ("emission_sampler", np.int32), ("pad0", np.int32),
+    ("emission_sampler", np.int32), ("sealed", np.int32),
 ])
 EMISSION_MODES = {"none": 0, "radiance": 1, "temperature": 2}
 

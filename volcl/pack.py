@@ -37,6 +37,7 @@ from .guides import guide
 from .mesh import triangle_areas32
 from .pack_materials import MaterialPacker, reads_uv, transmits
 from .phase import PhasePacker
+from .sealed import sealed_media
 from .scene.model import Camera, Filter, Scene
 from .scene import transform as tf
 from .scene.shapes import cylinder_bounds
@@ -253,6 +254,7 @@ class Packer:
         self.light_count, self.env_light, self.shape_light = 0, -1, {}
         self.stats = {"cylinders": len(self.cylinder_shapes)}
         self._envmaps: dict = {}        # id(emitter) -> (image, scale, its tables), see _envmap_tables
+        self._closed: dict = {}         # volcl.sealed's verdicts on meshes, by their arrays
 
     def medium_id(self, m) -> int:
         return -1 if m is None else self.medium_index[id(m)]
@@ -261,6 +263,7 @@ class Packer:
         """Pack `parts` (all by default) and the RenderParams record."""
         for part in sorted(parts, key=list(PARTS).index):
             getattr(self, "_pack_" + part)()
+        self._seal_media()
         params = self._params()
         self.arrays["params"] = params.reshape(1)      # a view: Packed.params edits it
         ordered = {name: self.arrays[name] for name in ARG_ORDER}
@@ -515,6 +518,17 @@ class Packer:
                           phase_table_ratio_error=max(phases.ratio_errors, default=0.0))
         self.arrays.update(media=media, grids=grid_desc, grid_data=grid_data, phase_lobes=phase_lobes,
                            phase_tables=phase_tables)
+
+    def _seal_media(self):
+        """Medium.sealed (volcl.sealed), after every pack: it depends on the shapes, lights and bsdfs,
+        which other parts pack. The media array is replaced, not edited, when it changes, so that an
+        update sees the change and uploads it."""
+        sealed = np.zeros(len(self.arrays["media"]), np.int32)
+        sealed[:len(self.media)] = sealed_media(self.scene, self.media, shape_bounds, self._closed)
+        if not np.array_equal(self.arrays["media"]["sealed"], sealed):
+            media = self.arrays["media"].copy()
+            media["sealed"] = sealed
+            self.arrays["media"] = media
 
     def _medium_boxes(self) -> dict:
         """medium index -> (lo, hi): the bounds of the shapes a homogeneous emissive medium fills, or

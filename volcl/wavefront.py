@@ -44,8 +44,9 @@ STRIDE = 65552                  # at most STRIDE - 16 paths in flight (wavefront
 ROW_FLAGS = 2
 FLAG_ALIVE = 1
 TABLE_STRIDE = 64
-TABLE_ROWS = 17
-T_LIGHT_POS, T_LIGHT_VALUE, T_SIGMA_T, T_ALBEDO, T_G, T_ISO, T_LANES, T_POINT, T_AREA = 0, 3, 6, 9, 12, 13, 14, 15, 16
+TABLE_ROWS = 18
+T_LIGHT_POS, T_LIGHT_VALUE, T_SIGMA_T, T_ALBEDO, T_G, T_ISO, T_LANES, T_POINT, T_AREA, T_SEALED = (
+    0, 3, 6, 9, 12, 13, 14, 15, 16, 17)
 TRI_SPACING = 16        # words between a tiny scene's triangle numbers (wavefront_state.h WF_TRI_AT)
 TRI_COORDS, SPHERE_COORDS, LIGHT_TRI_COORDS = 19, 5, 16     # numbers per triangle, sphere, light triangle
 # the most triangles and spheres of a scene the lanes stage traces itself, testing every one for
@@ -261,6 +262,7 @@ def lanes_table(packed, tiny: int = 0, spheres: int = 0, surface: bool = False) 
     t[T_LANES, :len(media)] = (media["type"] == layout.MEDIUM_TYPES["homogeneous"]) & (t[T_ISO, :len(media)] + hg > 0)
     t[T_POINT, :len(lights)] = lights["type"] == layout.LIGHT_TYPES["point"]
     t[T_AREA, :len(lights)] = lights["area"]
+    t[T_SEALED, :len(media)] = media["sealed"] != 0
     return np.concatenate([t.reshape(-1), tri.reshape(-1), sph.reshape(-1), lt.reshape(-1)])
 
 
