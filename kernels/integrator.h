@@ -38,6 +38,7 @@ inline int medium_after(const SceneData *sc, const SurfacePoint *s, float3 w, in
 inline int camera_start_medium(const SceneData *sc, float3 *o, float3 d, float *t_max, int medium) {
 #if VOLCL_HAS_MEDIUM_BOUNDARIES
     __global const RenderParams *rp = sc->params;
+    if (!rp->camera_walk) return medium;
     /* where the ray leaves the camera (the pinhole, a point of the lens, or of the orthographic
      * camera's plane): back from the near clip along d, by near_clip in the camera's z units */
     float3 fwd = (float3)(rp->cam_to_world[2], rp->cam_to_world[6], rp->cam_to_world[10]);

@@ -371,7 +371,8 @@ typedef struct {
     int emission_table;     /* emission NEE: offset in grid_data of its table of media (volcl/emission_sampler.py), or -1 */
     int emission_nee;       /* emission NEE on (1) or off (0); read only by VOLCL_HAS_EMISSION_NEE builds */
     int sample_border;      /* 1: pixels at the image's edge sample their whole filter (Mitsuba's hdrfilm) */
-    int pad0;
+    int camera_walk;        /* 0: no surface lies where camera rays reach the near clip plane (volcl.pack
+                             * near_clip_bounds): camera_start_medium has nothing to find */
 } RenderParams;
 
 #endif

@@ -330,6 +330,33 @@ def test_camera_just_outside_a_medium_within_the_near_clip(device):
     assert_mean_matches(r, pixel_mean(np.exp(-sigma * chord)), blocks=1, what="near clip inside the medium")
 
 
+@pytest.mark.parametrize("kind", ["perspective", "thinlens"])
+def test_the_camera_walk_is_skipped_only_where_it_would_find_nothing(device, monkeypatch, kind):
+    """camera_start_medium's walk to the near clip plane (a BVH query per camera ray) is skipped
+    where no surface's bounds reach the stretch of the camera rays it covers (RenderParams.camera_walk):
+    a camera at a distance gets the bits of the walked render; one whose near clip reaches a boundary
+    (as in the tests above) keeps the walk."""
+    import volcl.pack as vpack
+    box = null_box((-1, -1, -1), (1, 1, 1), interior=medium([0.5, 1.0, 2.0], 0.7, g=0.3))
+
+    def render_from(z, walk=None):
+        cam = camera(12, 8, fov=40, to_world=look_at((0.3, 0.2, z), (0, 0, 0)))
+        cam.near_clip = 0.05
+        if kind == "thinlens":
+            cam.kind, cam.aperture_radius, cam.focus_distance = "thinlens", 0.2, 2.5
+        with monkeypatch.context() as m:
+            if walk is not None:
+                m.setattr(vpack.Packer, "_camera_walk", lambda self, radius: walk)
+            sc = scene([box], [constant_env(1.0)], cam=cam)
+            return vpack.Packer(sc).pack().params["camera_walk"], render(sc, spp=16, seed=5, device=device)
+
+    flag, skipped = render_from(4.0)
+    assert flag == 0
+    _, walked = render_from(4.0, walk=True)
+    assert skipped.image.tobytes() == walked.image.tobytes()
+    assert render_from(1.03)[0] == 1 and render_from(1.0 - 0.5)[0] == 1       # near clip at the face; inside
+
+
 def test_coincident_faces_between_two_media(device):
     """Two closed boxes sharing a face, each filled with its own albedo-1 medium, inside a furnace
     of wall albedo a: which of the two coincident faces a ray finds first is up to rounding, but

@@ -215,6 +215,29 @@ def camera_tangents(cam: Camera) -> tuple[float, float]:
     return tx, tx * h / w
 
 
+def near_clip_bounds(cam: Camera) -> tuple[np.ndarray, np.ndarray] | None:
+    """World bounds of every camera ray's stretch between where it leaves the camera and the near
+    clip plane (kernels/integrator.h camera_start_medium walks it), padded for the filter's reach
+    past the image, the principal point and the lens; None for an orthographic camera, whose rays
+    leave from the whole film plane."""
+    if cam.kind == "orthographic":
+        return None
+    tx, ty = camera_tangents(cam)
+    reach = 1.0 + 2.0 * max(cam.rfilter.radius, 1.0) / min(cam.width, cam.height)
+    x = tx * (reach + 2.0 * abs(cam.principal_point[0]))
+    y = ty * (reach + 2.0 * abs(cam.principal_point[1]))
+    lens = cam.aperture_radius if cam.kind == "thinlens" else 0.0
+    if lens:
+        slope = lens / max(cam.focus_distance, 1e-30)
+        x, y = x + slope, y + slope
+    n = cam.near_clip
+    corners = np.array([[sx * (lens + n * x), sy * (lens + n * y), z]
+                        for sx in (-1, 1) for sy in (-1, 1) for z in (-n, n)], np.float64)
+    m = np.asarray(cam.to_world, np.float64)
+    world = corners @ m[:3, :3].T + m[:3, 3]
+    return world.min(0), world.max(0)
+
+
 class Packer:
     """The kernel arrays of one scene, packed part by part (see the module docstring). The scene's
     structure must not change after construction; its values may, followed by pack(parts)."""
@@ -578,7 +601,19 @@ class Packer:
         lo, hi = self.bounds
         params["scene_center"] = 0.5 * (lo + hi)
         params["scene_radius"] = 0.5 * float(np.linalg.norm(hi - lo))
+        params["camera_walk"] = int(self._camera_walk(params["scene_radius"]))
         return params
+
+    def _camera_walk(self, scene_radius: float) -> bool:
+        """Whether a surface may lie where camera rays are walked to the near clip plane: if none can,
+        the walk finds nothing, and the kernels skip it (a BVH query per camera ray)."""
+        box = near_clip_bounds(self.scene.camera)
+        if box is None or self.scene.instances:
+            return True
+        # the walk starts a little behind the camera (camera_start_medium's `back`), and float32 rounding
+        pad = 1e-4 * (float(np.abs(self.scene.camera.to_world[:3, 3]).max()) + scene_radius) + 1e-6
+        lo, hi = box[0] - pad, box[1] + pad
+        return any(np.all(b[0] <= hi) and np.all(lo <= b[1]) for b in map(shape_bounds, self.scene.shapes))
 
 
 def pack(scene: Scene, features: dict | None = None, max_leaf: int = 4, majorant_cells: int | None = None,
