@@ -350,11 +350,33 @@ def test_the_camera_walk_is_skipped_only_where_it_would_find_nothing(device, mon
             sc = scene([box], [constant_env(1.0)], cam=cam)
             return vpack.Packer(sc).pack().params["camera_walk"], render(sc, spp=16, seed=5, device=device)
 
-    flag, skipped = render_from(4.0)
+    for z in (4.0, 0.5):                # at a distance; inside the box, far from its faces
+        flag, skipped = render_from(z)
+        assert flag == 0, z
+        _, walked = render_from(z, walk=True)
+        assert skipped.image.tobytes() == walked.image.tobytes(), z
+    assert render_from(1.03)[0] == 1 and render_from(0.97)[0] == 1      # the near clip reaches the face
+
+
+def test_the_camera_walk_near_a_sphere(device, monkeypatch):
+    """Inside a null sphere of fog, away from its surface: skipped, the walked bits; with the near
+    clip reaching the surface from inside or outside: kept."""
+    import volcl.pack as vpack
+    ball = sphere((0, 0, 0), 1.0, Bsdf("null"), interior=medium([0.5, 1.0, 2.0], 0.7, g=0.3))
+
+    def render_from(z, walk=None):
+        cam = camera(12, 8, fov=60, to_world=look_at((0.1, 0.0, z), (0, 0, -2)))
+        cam.near_clip = 0.05
+        with monkeypatch.context() as m:
+            if walk is not None:
+                m.setattr(vpack.Packer, "_camera_walk", lambda self, radius: walk)
+            sc = scene([ball], [constant_env(1.0)], cam=cam)
+            return vpack.Packer(sc).pack().params["camera_walk"], render(sc, spp=16, seed=5, device=device)
+
+    flag, skipped = render_from(0.3)
     assert flag == 0
-    _, walked = render_from(4.0, walk=True)
-    assert skipped.image.tobytes() == walked.image.tobytes()
-    assert render_from(1.03)[0] == 1 and render_from(1.0 - 0.5)[0] == 1       # near clip at the face; inside
+    assert skipped.image.tobytes() == render_from(0.3, walk=True)[1].image.tobytes()
+    assert render_from(0.97)[0] == 1 and render_from(1.02)[0] == 1
 
 
 def test_coincident_faces_between_two_media(device):

@@ -238,6 +238,24 @@ def near_clip_bounds(cam: Camera) -> tuple[np.ndarray, np.ndarray] | None:
     return world.min(0), world.max(0)
 
 
+def _surface_may_touch(s, lo, hi) -> bool:
+    """Whether shape s's surface may reach into the box [lo, hi]: a sphere's unless the box lies wholly
+    inside or outside it, a mesh's where a triangle's bounds touch the box (a camera inside a fog box
+    is far from its faces), other shapes by their bounds."""
+    b = shape_bounds(s)
+    if not (np.all(b[0] <= hi) and np.all(lo <= b[1])):
+        return False
+    if s.kind == "sphere":
+        c = np.asarray(s.center, np.float64)
+        near = np.linalg.norm(np.clip(c, lo, hi) - c)
+        far = np.linalg.norm(np.maximum(np.abs(lo - c), np.abs(hi - c)))
+        return bool(near <= s.radius <= far)
+    if s.kind == "mesh":
+        tri = np.asarray(s.vertices, np.float64)[s.faces]
+        return bool(np.any(np.all(tri.min(1) <= hi, axis=1) & np.all(lo <= tri.max(1), axis=1)))
+    return True
+
+
 class Packer:
     """The kernel arrays of one scene, packed part by part (see the module docstring). The scene's
     structure must not change after construction; its values may, followed by pack(parts)."""
@@ -613,7 +631,7 @@ class Packer:
         # the walk starts a little behind the camera (camera_start_medium's `back`), and float32 rounding
         pad = 1e-4 * (float(np.abs(self.scene.camera.to_world[:3, 3]).max()) + scene_radius) + 1e-6
         lo, hi = box[0] - pad, box[1] + pad
-        return any(np.all(b[0] <= hi) and np.all(lo <= b[1]) for b in map(shape_bounds, self.scene.shapes))
+        return any(_surface_may_touch(s, lo, hi) for s in self.scene.shapes)
 
 
 def pack(scene: Scene, features: dict | None = None, max_leaf: int = 4, majorant_cells: int | None = None,
