@@ -224,7 +224,7 @@ def _tile_renderer(scene, spec, tile, start=0):
     between tasks and fetch it again (its active memory manager keeps one copy of data no queued
     task needs), and the copy is the same scene."""
     from .renderer import Renderer
-    name = (spec.get("scene"), scene.version)
+    name = (spec["scene"], scene.version)
     key = (name, repr(spec), tile)
     cache = getattr(_local, "renderers", None)
     if cache is None or cache.get("scene") != name:
@@ -462,7 +462,7 @@ class _Stream:
             self.submit(i, 0)
         for f, out in self.ac:
             job = self.jobs.pop(f)
-            if f.status == "cancelled" and self.scene_lost(f):
+            if f.status == "cancelled" and self.cancelled_with_scene(f):
                 self.submit(job.index, job.round)       # a new task, on the scene sent again
                 continue
             if f.status in ("error", "cancelled"):
@@ -491,7 +491,7 @@ class _Stream:
             raise self.error
         return "spp"
 
-    def scene_lost(self, f) -> bool:
+    def cancelled_with_scene(self, f) -> bool:
         """Whether cancelled task `f` was cancelled because the scene it needs was lost; if so, the
         scene is sent again (once: the other tasks cancelled with it find it sent)."""
         if not f.key.startswith(self.prefix()):        # submitted before the scene was sent again

@@ -284,14 +284,29 @@ def triangle_areas32(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
 
 
-# closure_problem's answers while their arrays live: the scene checks ask at load, volcl.sealed at
-# the first pack, about the same arrays (seconds each on a million triangles)
-_closure_answers: dict = {}
+# answers about a mesh's two arrays while they live: the scene checks ask closure_problem at load,
+# volcl.sealed asks it and encloses_outward at every pack (seconds each on a million triangles)
+_answers: dict = {}
+
+
+def _remembered(vertices, faces, question, compute):
+    """compute(vertices, faces), remembered under `question` for these two arrays while they live
+    (they must not be edited in place meanwhile)."""
+    key = (id(vertices), id(faces))
+    kept = _answers.get(key)
+    if kept is None or kept[0]() is not vertices or kept[1]() is not faces:
+        if not (isinstance(vertices, np.ndarray) and isinstance(faces, np.ndarray)):
+            return compute(vertices, faces)
+        forget = lambda _, key=key: _answers.pop(key, None)     # noqa: E731
+        kept = _answers[key] = (weakref.ref(vertices, forget), weakref.ref(faces, forget), {})
+    if question not in kept[2]:
+        kept[2][question] = compute(vertices, faces)
+    return kept[2][question]
 
 
 def closure_problem(vertices: np.ndarray, faces: np.ndarray) -> Optional[str]:
     """Why the mesh does not enclose a volume the way a medium boundary must, or None if it does
-    (remembered for the same two arrays, which must not be edited in place meanwhile).
+    (remembered for the same two arrays).
 
     The kernels decide inside and outside by the side a ray crosses each triangle from, so a medium
     needs a closed (watertight: every edge shared by exactly two triangles), consistently wound
@@ -299,15 +314,20 @@ def closure_problem(vertices: np.ndarray, faces: np.ndarray) -> Optional[str]:
     count as shared only when their float32 coordinates are equal, as they must be for the
     watertight intersection test; zero-area triangles are left out (rays never hit them).
     """
-    kept = _closure_answers.get((id(vertices), id(faces)))
-    if kept is not None and kept[0]() is vertices and kept[1]() is faces:
-        return kept[2]
-    answer = _closure(vertices, faces)
-    if isinstance(vertices, np.ndarray) and isinstance(faces, np.ndarray):
-        key = (id(vertices), id(faces))
-        forget = lambda _, key=key: _closure_answers.pop(key, None)     # noqa: E731
-        _closure_answers[key] = (weakref.ref(vertices, forget), weakref.ref(faces, forget), answer)
-    return answer
+    return _remembered(vertices, faces, "closure", _closure)
+
+
+def encloses_outward(vertices: np.ndarray, faces: np.ndarray) -> bool:
+    """Closed and consistently wound (closure_problem) and wound outwards: the signed volume its
+    triangles enclose is positive (remembered for the same two arrays)."""
+    return _remembered(vertices, faces, "outward", _encloses_outward)
+
+
+def _encloses_outward(vertices, faces) -> bool:
+    if closure_problem(vertices, faces) is not None:
+        return False
+    p = np.asarray(vertices, np.float64)[np.asarray(faces)]
+    return float(np.einsum("ij,ij->i", p[:, 0], np.cross(p[:, 1], p[:, 2])).sum()) > 0.0
 
 
 def _closure(vertices, faces) -> Optional[str]:

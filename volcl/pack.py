@@ -37,7 +37,7 @@ from .guides import guide
 from .mesh import triangle_areas32
 from .pack_materials import MaterialPacker, reads_uv, transmits
 from .phase import PhasePacker
-from .sealed import sealed_media
+from .sealed import boxes_touch, sealed_media
 from .scene.model import Camera, Filter, Scene
 from .scene import transform as tf
 from .scene.shapes import cylinder_bounds
@@ -242,8 +242,7 @@ def _surface_may_touch(s, lo, hi) -> bool:
     """Whether shape s's surface may reach into the box [lo, hi]: a sphere's unless the box lies wholly
     inside or outside it, a mesh's where a triangle's bounds touch the box (a camera inside a fog box
     is far from its faces), other shapes by their bounds."""
-    b = shape_bounds(s)
-    if not (np.all(b[0] <= hi) and np.all(lo <= b[1])):
+    if not boxes_touch(shape_bounds(s), (lo, hi)):
         return False
     if s.kind == "sphere":
         c = np.asarray(s.center, np.float64)
@@ -295,7 +294,6 @@ class Packer:
         self.light_count, self.env_light, self.shape_light = 0, -1, {}
         self.stats = {"cylinders": len(self.cylinder_shapes)}
         self._envmaps: dict = {}        # id(emitter) -> (image, scale, its tables), see _envmap_tables
-        self._closed: dict = {}         # volcl.sealed's verdicts on meshes, by their arrays
 
     def medium_id(self, m) -> int:
         return -1 if m is None else self.medium_index[id(m)]
@@ -565,7 +563,7 @@ class Packer:
         which other parts pack. The media array is replaced, not edited, when it changes, so that an
         update sees the change and uploads it."""
         sealed = np.zeros(len(self.arrays["media"]), np.int32)
-        sealed[:len(self.media)] = sealed_media(self.scene, self.media, shape_bounds, self._closed)
+        sealed[:len(self.media)] = sealed_media(self.scene, self.media, shape_bounds)
         if not np.array_equal(self.arrays["media"]["sealed"], sealed):
             media = self.arrays["media"].copy()
             media["sealed"] = sealed

@@ -8,8 +8,8 @@ either before it meets the same surface.
 The test is conservative. A medium is sealed only when:
 - no camera starts in it and no shape names it as its exterior;
 - every shape that names it as interior is a closed surface whose inside is its interior: a sphere,
-  or a mesh that is closed, consistently wound (volcl.mesh.closure_problem) and wound outwards
-  (positive volume); not instanced, not flipped;
+  or a mesh that is closed, consistently wound and wound outwards (volcl.mesh.encloses_outward);
+  not instanced, not flipped;
 - every one of those shapes stops shadow rays (not null, no mask, no thin dielectric:
   volcl.pack_materials.transmits) and emits nothing;
 - no point or spot light and no emitting shape has bounds that touch the bounds of those shapes
@@ -19,14 +19,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mesh import closure_problem
+from .mesh import encloses_outward
 from .pack_materials import transmits
 
 
-def sealed_media(scene, media: list, bounds_of, cache: dict) -> list[bool]:
+def sealed_media(scene, media: list, bounds_of) -> list[bool]:
     """For each medium of `media` (the packer's list), whether it is sealed; `bounds_of(shape)` gives
-    a shape's world bounds (lo, hi); `cache` keeps each mesh's verdict with the arrays it was made
-    from, between packs (a mesh placed again gets new arrays)."""
+    a shape's world bounds (lo, hi)."""
     boundaries = {id(m): [] for m in media}
     open_to = {id(scene.camera.medium)}
     for s in scene.shapes:
@@ -38,35 +37,21 @@ def sealed_media(scene, media: list, bounds_of, cache: dict) -> list[bool]:
     out = []
     for m in media:
         shapes = boundaries[id(m)]
-        ok = bool(shapes) and id(m) not in open_to and all(_closed_opaque(s, cache) for s in shapes)
+        ok = bool(shapes) and id(m) not in open_to and all(_closed_opaque(s) for s in shapes)
         if ok:
             boxes = [bounds_of(s) for s in shapes]
-            ok = not any(_overlap(a, b) for a in boxes for b in lights)
+            ok = not any(boxes_touch(a, b) for a in boxes for b in lights)
         out.append(ok)
     return out
 
 
-def _closed_opaque(s, cache: dict) -> bool:
+def _closed_opaque(s) -> bool:
     """A closed surface around its interior that stops shadow rays and emits nothing."""
     if s.group is not None or s.flip_normals or s.emitter_radiance is not None or transmits(s.bsdf):
         return False
     if s.kind == "sphere":
         return s.radius > 0
-    if s.kind != "mesh":
-        return False                    # cylinders are open tubes
-    kept = cache.get(id(s))
-    if kept is None or kept[0] is not s.vertices or kept[1] is not s.faces:
-        kept = cache[id(s)] = (s.vertices, s.faces, _watertight_outward(s.vertices, s.faces))
-    return kept[2]
-
-
-def _watertight_outward(vertices, faces) -> bool:
-    """Closed and consistently wound as a medium boundary must be (volcl.mesh.closure_problem), and
-    wound outwards: the signed volume its triangles enclose is positive."""
-    if closure_problem(vertices, faces) is not None:
-        return False
-    p = np.asarray(vertices, np.float64)[np.asarray(faces)]
-    return float(np.einsum("ij,ij->i", p[:, 0], np.cross(p[:, 1], p[:, 2])).sum()) > 0.0
+    return s.kind == "mesh" and encloses_outward(s.vertices, s.faces)     # cylinders are open tubes
 
 
 def _light_bounds(scene, bounds_of) -> list:
@@ -79,5 +64,6 @@ def _light_bounds(scene, bounds_of) -> list:
     return boxes
 
 
-def _overlap(a, b) -> bool:
+def boxes_touch(a, b) -> bool:
+    """Whether boxes a and b, each (lo, hi), share a point."""
     return bool(np.all(a[0] <= b[1]) and np.all(b[0] <= a[1]))
