@@ -344,14 +344,20 @@ inline int packet_top_intersect(const SceneData *sc, __global const LeafPacket *
 #include "bvh_traverse.h"
 #endif
 
-/* A query (TRACE_*) for hits in (0, tmax); true when something is hit, with *hit as the mode says
- * (bvh_traverse.h; with INSTANCES, hit->inst names the instance whose group was hit, or -1). */
-inline bool bvh_trace(const SceneData *sc, float3 o, float3 d, float tmax, int mode, Hit *hit) {
+/* A query (TRACE_*) for hits in (0, tmax) in the tree whose root is wide node `root`; true when
+ * something is hit, with *hit as the mode says (bvh_traverse.h; with INSTANCES, hit->inst names the
+ * instance whose group was hit, or -1). */
+inline bool bvh_trace_in(const SceneData *sc, int root, float3 o, float3 d, float tmax, int mode, Hit *hit) {
 #if VOLCL_HAS_INSTANCES
-    return bvh_traverse_top(sc, 0, o, d, tmax, mode, hit) != 0;
+    return bvh_traverse_top(sc, root, o, d, tmax, mode, hit) != 0;
 #else
-    return bvh_traverse_scene(sc, 0, o, d, tmax, mode, hit) != 0;
+    return bvh_traverse_scene(sc, root, o, d, tmax, mode, hit) != 0;
 #endif
+}
+
+/* The same query over the whole scene. */
+inline bool bvh_trace(const SceneData *sc, float3 o, float3 d, float tmax, int mode, Hit *hit) {
+    return bvh_trace_in(sc, 0, o, d, tmax, mode, hit);
 }
 
 #endif

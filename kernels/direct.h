@@ -71,7 +71,9 @@ inline float3 direct_radiance(const SceneData *sc, Rng *rng, float3 o, float3 d,
             /* Mitsuba's direct integrator tests visibility: every surface blocks, masks included */
             float t = ls.dist < INFINITY ? ls.dist * 0.9999f : INFINITY;
             Hit blocker;
-            if (bvh_trace(sc, offset_origin(s.p, s.mag, s.ng, ls.wi), ls.wi, t, TRACE_ANY, &blocker)) continue;
+            if (bvh_trace_in(sc, surface_shadow_root(sc, &ls), offset_origin(s.p, s.mag, s.ng, ls.wi), ls.wi, t,
+                             TRACE_ANY, &blocker))
+                continue;
             float w = ls.delta ? 1.0f : power_heuristic(ls.pdf * frac_e, pdf_b * frac_b) / n_e;
             L += f * ls.value * (w / ls.pdf);
         }

@@ -68,9 +68,11 @@ inline int camera_start_medium(const SceneData *sc, float3 *o, float3 d, float *
  * surface is in the way, otherwise the product of the transmittances of the media crossed (for
  * heterogeneous media an unbiased ratio-tracking estimate, which draws from rng; tracking cut-offs
  * are counted in *cutoffs). *end_medium: the medium at the segment's far end; *last_segment: the
- * length of its last medium segment, from the boundary it entered that medium at (emission NEE). */
-inline float3 shadow_transmittance_to(const SceneData *sc, float3 o, float3 w, float t_max, int medium, Rng *rng,
-                                      uint *cutoffs, int *end_medium, float *last_segment) {
+ * length of its last medium segment, from the boundary it entered that medium at (emission NEE).
+ * `root`: the tree traced (bvh_trace_in): 0, or surface_shadow_root's for a segment between two
+ * points of the scene. */
+inline float3 shadow_transmittance_to(const SceneData *sc, int root, float3 o, float3 w, float t_max, int medium,
+                                      Rng *rng, uint *cutoffs, int *end_medium, float *last_segment) {
     *end_medium = -2;       /* no medium: the segment was blocked before its end */
     *last_segment = 0.0f;
 #if VOLCL_HAS_MEDIA || VOLCL_HAS_NULL_BSDF || VOLCL_HAS_MASK || VOLCL_HAS_THINDIELECTRIC
@@ -78,7 +80,7 @@ inline float3 shadow_transmittance_to(const SceneData *sc, float3 o, float3 w, f
     float t_back = 0.0f;    /* from the boundary just crossed to the offset origin: see integrator_radiance */
     for (int i = 0; i < VOLCL_MAX_CROSSINGS; ++i) {
         Hit h;
-        bool hit = bvh_trace(sc, o, w, t_max, TRACE_SHADOW, &h);
+        bool hit = bvh_trace_in(sc, root, o, w, t_max, TRACE_SHADOW, &h);
         SurfacePoint s;
         float3 passed = (float3)(1.0f);
         if (hit) {
@@ -113,16 +115,23 @@ inline float3 shadow_transmittance_to(const SceneData *sc, float3 o, float3 w, f
     Hit h;
     *end_medium = medium;
     *last_segment = t_max;
-    return bvh_trace(sc, o, w, t_max, TRACE_ANY, &h) ? (float3)(0.0f) : (float3)(1.0f);
+    return bvh_trace_in(sc, root, o, w, t_max, TRACE_ANY, &h) ? (float3)(0.0f) : (float3)(1.0f);
 #endif
 }
 
 /* The same, where the caller does not need to know in which medium the segment ends. */
-inline float3 shadow_transmittance(const SceneData *sc, float3 o, float3 w, float t_max, int medium, Rng *rng,
-                                   uint *cutoffs) {
+inline float3 shadow_transmittance(const SceneData *sc, int root, float3 o, float3 w, float t_max, int medium,
+                                   Rng *rng, uint *cutoffs) {
     int end_medium;
     float last_segment;
-    return shadow_transmittance_to(sc, o, w, t_max, medium, rng, cutoffs, &end_medium, &last_segment);
+    return shadow_transmittance_to(sc, root, o, w, t_max, medium, rng, cutoffs, &end_medium, &last_segment);
+}
+
+/* The tree a shadow ray from a surface point towards light sample ls is traced in: where the sample
+ * is a point of the scene (at a finite distance) the tree without the faces of the scene's convex
+ * hull (RenderParams.shadow_root, volcl.hull), which the segment cannot cross; else the scene's. */
+inline int surface_shadow_root(const SceneData *sc, const LightSample *ls) {
+    return ls->dist < INFINITY ? sc->params->shadow_root : 0;
 }
 
 #if VOLCL_HAS_EMISSION_NEE
@@ -158,7 +167,7 @@ inline float3 emission_nee_finish(const SceneData *sc, const EmissionPoint *ep, 
     if (!(max_component(le) > 0.0f)) return (float3)(0.0f);
     int end_medium;
     float last_segment;
-    float3 tr = shadow_transmittance_to(sc, origin, wi, t_max, medium, rng, cutoffs, &end_medium, &last_segment);
+    float3 tr = shadow_transmittance_to(sc, 0, origin, wi, t_max, medium, rng, cutoffs, &end_medium, &last_segment);
     if (end_medium != ep->medium || !(max_component(tr) > 0.0f)) return (float3)(0.0f);
     float w = 1.0f;
     if (sc->params->mis) {
@@ -205,12 +214,13 @@ inline float hit_weight(__global const RenderParams *rp, float pdf_scatter, floa
 }
 
 /* Light arriving at a vertex by next-event estimation, already weighted by MIS against `scatter_pdf`.
- * `f` is the vertex's scattering value towards ls.wi (BSDF value * cos, or phase value). */
-inline float3 nee_contribution(const SceneData *sc, const LightSample *ls, float3 f, float scatter_pdf,
+ * `f` is the vertex's scattering value towards ls.wi (BSDF value * cos, or phase value); `root`
+ * the tree its shadow ray is traced in (shadow_transmittance_to). */
+inline float3 nee_contribution(const SceneData *sc, int root, const LightSample *ls, float3 f, float scatter_pdf,
                                float3 origin, int medium, Rng *rng, uint *cutoffs) {
     /* stop a hair before the light so the shadow ray never hits the emitter itself */
     float t_max = ls->dist < INFINITY ? ls->dist * 0.9999f : INFINITY;
-    float3 tr = shadow_transmittance(sc, origin, ls->wi, t_max, medium, rng, cutoffs);
+    float3 tr = shadow_transmittance(sc, root, origin, ls->wi, t_max, medium, rng, cutoffs);
     if (max_component(tr) <= 0.0f) return (float3)(0.0f);
     float w = (ls->delta || !sc->params->mis) ? 1.0f : power_heuristic(ls->pdf, scatter_pdf);
     return f * ls->value * tr * (w / ls->pdf);
@@ -342,7 +352,7 @@ inline float3 equiangular_direct(const SceneData *sc, Rng *rng, EquiangularSegme
     float3 tr = transmittance_exp(sigma_t, t);
     float w = equiangular_weight(es->tech, sc->params->mis, pdf_e, medium_distance_pdf_tr(m, es->beta, tr));
     if (!(w > 0.0f)) return (float3)(0.0f);
-    float3 tr_shadow = shadow_transmittance(sc, x, wi, dist * 0.9999f, medium, rng, cutoffs);
+    float3 tr_shadow = shadow_transmittance(sc, 0, x, wi, dist * 0.9999f, medium, rng, cutoffs);
     if (max_component(tr_shadow) <= 0.0f) return (float3)(0.0f);
     float3 sigma_s = sigma_t * vload_f3(m->albedo);
     float ph = phase_eval(sc, m, es->d, wi);
@@ -436,7 +446,7 @@ inline int path_medium_event(const SceneData *sc, Rng *rng, PathState *ps, bool 
             if (w_eq > 0.0f) {
                 float ph_pdf;
                 float ph = phase_eval_pdf(sc, m, ps->d, ls.wi, &ph_pdf);
-                ps->L += ps->beta * (w_eq * nee_contribution(sc, &ls, (float3)(ph), ph_pdf, p, ps->medium, rng, cutoffs));
+                ps->L += ps->beta * (w_eq * nee_contribution(sc, 0, &ls, (float3)(ph), ph_pdf, p, ps->medium, rng, cutoffs));
             }
         }
     }
@@ -502,7 +512,8 @@ inline void path_surface_nee(const SceneData *sc, Rng *rng, PathState *ps, const
             float pdf;
             float3 f = bsdf_eval(bsdf, wo, ls.wi, &pdf);
             if (max_component(f) > 0.0f) {
-                ps->L += ps->beta * nee_contribution(sc, &ls, f, pdf, offset_origin(s->p, s->mag, s->ng, ls.wi),
+                ps->L += ps->beta * nee_contribution(sc, surface_shadow_root(sc, &ls), &ls, f, pdf,
+                                                     offset_origin(s->p, s->mag, s->ng, ls.wi),
                                                      medium_after(sc, s, ls.wi, ps->medium), rng, cutoffs);
             }
         }

@@ -178,14 +178,17 @@ inline bool lanes_closest_hit(__global const float *table, V3 o, V3 d, float tma
 }
 
 /* Whether anything blocks the segment (0, tmax) (every triangle is opaque, so this is what
- * shadow_transmittance's shadow query decides): tmax if not, else -1. */
-inline float lanes_reach(__global const float *table, V3 o, V3 d, float tmax) {
+ * shadow_transmittance's shadow query decides): tmax if not, else -1. Triangle k is left out where
+ * bit k of `skip` is set (a constant: the unrolled loop keeps only the others): VOLCL_WF_HULL_SKIP
+ * for a segment between two points of the scene, the faces of its convex hull (volcl.hull). */
+inline float lanes_reach(__global const float *table, V3 o, V3 d, float tmax, int skip) {
     LanesShear s = lanes_shear(o, d);
     /* a hit makes the segment empty for the triangles after it: a chain of selects, where an OR of
      * the tests was packed into a vector as a horizontal reduction (which stops the loop vectorizer) */
     float reach = tmax;
 #pragma unroll
     for (int k = 0; k < VOLCL_WF_TINY; ++k) {
+        if ((skip >> k) & 1) continue;
         float ts, det, e1, e2;
         reach = lanes_triangle_hit(table, k, &s, reach, &ts, &det, &e1, &e2) ? -1.0f : reach;
     }

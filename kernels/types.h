@@ -373,6 +373,10 @@ typedef struct {
     int sample_border;      /* 1: pixels at the image's edge sample their whole filter (Mitsuba's hdrfilm) */
     int camera_walk;        /* 0: no surface lies where camera rays reach the near clip plane (volcl.pack
                              * near_clip_bounds): camera_start_medium has nothing to find */
+    int shadow_root;        /* the wide node of the tree without the faces of the scene's convex hull
+                             * (volcl.hull), for shadow rays from surfaces to points of the scene;
+                             * 0: the scene's own tree */
+    int pad0[3];
 } RenderParams;
 
 #endif

@@ -104,7 +104,7 @@ inline void wf_store(__global float *fs, __global int *is, int i, const PathStat
 inline float3 wf_shadow(const SceneData *sc, __global const float *fs, int i, int k, int medium, Rng *rng,
                         uint *cut) {
     int r = WF_SHADOW(k);
-    float3 tr = shadow_transmittance(sc, wf_get3(fs, r + WF_SHADOW_O, i), wf_get3(fs, r + WF_SHADOW_D, i),
+    float3 tr = shadow_transmittance(sc, 0, wf_get3(fs, r + WF_SHADOW_O, i), wf_get3(fs, r + WF_SHADOW_D, i),
                                      FROW(r + WF_SHADOW_T), medium, rng, cut);
     return max_component(tr) > 0.0f ? wf_get3(fs, r + WF_SHADOW_C, i) * tr : (float3)(0.0f);
 }
@@ -139,7 +139,7 @@ inline float3 wf_nee(const SceneData *sc, __global const float *fs, int i, const
     __global const Medium *m = &sc->media[ps->medium];
     float ph_pdf;
     float ph = phase_eval_pdf(sc, m, d_in, ls.wi, &ph_pdf);
-    return ps->beta * nee_contribution(sc, &ls, (float3)(ph), ph_pdf, p, ps->medium, rng, cut);
+    return ps->beta * nee_contribution(sc, 0, &ls, (float3)(ph), ph_pdf, p, ps->medium, rng, cut);
 }
 
 VOLCL_KERNEL void wavefront_scalar(VOLCL_SCENE_ARGS,

@@ -245,10 +245,10 @@ __kernel void wavefront_medium(__global float *fs, __global int *is, __global co
      * wait for the first's (lanes_after): the two rays' conditions and tests side by side were
      * packed into <2 x ...> vectors */
     float t0 = dist * 0.9999f;
-    float reach0 = lanes_reach(table, x, wi, (run & shadow0) ? t0 : -1.0f);
+    float reach0 = lanes_reach(table, x, wi, (run & shadow0) ? t0 : -1.0f, 0);
     V3 tr0 = lanes_transmittance(sigma_t, t0);
     float t1 = lanes_after(dist_l * 0.9999f, reach0);
-    float reach1 = lanes_reach(table, lanes_after3(p, reach0), lanes_after3(wl, reach0), shadow1 ? t1 : -1.0f);
+    float reach1 = lanes_reach(table, lanes_after3(p, reach0), lanes_after3(wl, reach0), shadow1 ? t1 : -1.0f, 0);
     V3 tr1 = lanes_transmittance(sigma_t, t1);
     bool pass0 = (reach0 >= 0.0f) & (v3_max(tr0) > 0.0f);
     bool pass1 = (reach1 >= 0.0f) & (v3_max(tr1) > 0.0f);

@@ -19,6 +19,9 @@
 #ifndef VOLCL_WF_LIGHT_TRIS
 #define VOLCL_WF_LIGHT_TRIS 0   /* area-light triangles the surface stage samples (wavefront_surface.cl) */
 #endif
+#ifndef VOLCL_WF_HULL_SKIP
+#define VOLCL_WF_HULL_SKIP 0    /* tested triangles the surface stage's shadow rays skip (lanes_reach) */
+#endif
 
 #define WF_STRIDE 65552
 #define WF_AT(r) ((r) * WF_STRIDE + i)

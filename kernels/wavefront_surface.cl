@@ -67,7 +67,8 @@ __kernel void wavefront_surface(__global float *fs, __global int *is, __global c
     nee = nee & (value_max > 0.0f) & (wo_z > 0.0f) & (wi_z > 0.0f) & (lanes_after(v3_max(f), value_max) > 0.0f);
     V3 origin = lanes_offset_origin(p, tri.mag, ng, ls.wi);
     /* (the ray's direction waits for its origin: the |.| of both, side by side, were packed) */
-    float reach = lanes_reach(table, origin, lanes_after3(ls.wi, origin.x), nee ? ls.dist * 0.9999f : -1.0f);
+    float reach = lanes_reach(table, origin, lanes_after3(ls.wi, origin.x), nee ? ls.dist * 0.9999f : -1.0f,
+                              VOLCL_WF_HULL_SKIP);
     float w = (ls.delta | !rp->mis) ? 1.0f : lanes_power_heuristic(ls.pdf, pdf_b);
     V3 c = v3_scale(v3_mul(f, ls.value), w / ls.pdf);
     L = v3_sel(nee & (reach >= 0.0f), v3(L.x + beta.x * c.x, L.y + beta.y * c.y, L.z + beta.z * c.z), L);

@@ -166,6 +166,7 @@ RENDER_PARAMS = np.dtype([
     ("focus_distance", np.float32), ("principal_point", np.float32, 2), ("emitter_samples", np.int32),
     ("bsdf_samples", np.int32), ("integrator", np.int32), ("emission_table", np.int32),
     ("emission_nee", np.int32), ("sample_border", np.int32), ("camera_walk", np.int32),
+    ("shadow_root", np.int32), ("pad0", np.int32, 3),
 ])
 INTEGRATORS = {"path": 0, "direct": 1}
 CAMERA_TYPES = {"perspective": 0, "thinlens": 1, "orthographic": 2}

@@ -27,8 +27,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import emission_sampler, envmap, layout
-from .bvh_instanced import two_level_bvh
+from . import emission_sampler, envmap, hull, layout
+from .bvh_instanced import relocate, two_level_bvh
 from .bvh_wide import device_bvh, empty_wide
 from .errors import VolclError
 from .features import detect
@@ -70,6 +70,10 @@ class Packed:
     sphere_count: int = 0
     bvh_seconds: float = 0.0
     stats: dict = field(default_factory=dict)
+    # the scene tree's leaf packets come first; the shadow tree's (volcl.hull) follow
+    scene_leaves: int = 0
+    # the triangles that tree leaves out, where params["shadow_root"] uses it (else none)
+    hull_faces: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
 
 def _index_by_identity(objs):
@@ -291,6 +295,7 @@ class Packer:
         self.triangle_count = offset
         self.bvh_seconds = 0.0
         self.bounds = (np.zeros(3), np.zeros(3))
+        self.scene_leaves, self.shadow_root, self.hull = 0, 0, None     # _pack_geometry's
         self.light_count, self.env_light, self.shape_light = 0, -1, {}
         self.stats = {"cylinders": len(self.cylinder_shapes)}
         self._envmaps: dict = {}        # id(emitter) -> (image, scale, its tables), see _envmap_tables
@@ -306,8 +311,9 @@ class Packer:
         params = self._params()
         self.arrays["params"] = params.reshape(1)      # a view: Packed.params edits it
         ordered = {name: self.arrays[name] for name in ARG_ORDER}
+        faces = self.hull[0] if params["shadow_root"] else np.zeros(0, np.int64)
         return Packed(ordered, params, detect(self.scene), self.triangle_count,
-                      len(self.sphere_shapes), self.bvh_seconds, dict(self.stats))
+                      len(self.sphere_shapes), self.bvh_seconds, dict(self.stats), self.scene_leaves, faces)
 
     # -- parts ----------------------------------------------------------------------------------
 
@@ -384,16 +390,40 @@ class Packer:
                 nodes, leaves = self._instanced_bvh(codes, np.concatenate(lo), np.concatenate(hi), tri_v, opaque,
                                                     np.concatenate([tri_shape, analytic_shape]))
             else:
-                nodes, leaves = device_bvh(codes, np.concatenate(lo), np.concatenate(hi), tri_v, opaque,
-                                           max_leaf=self.max_leaf)
-                self.bounds = (np.concatenate(lo).min(0), np.concatenate(hi).max(0))
+                lo, hi = np.concatenate(lo), np.concatenate(hi)
+                nodes, leaves = device_bvh(codes, lo, hi, tri_v, opaque, max_leaf=self.max_leaf)
+                self.bounds = (lo.min(0), hi.max(0))
         else:
             nodes, leaves = empty_wide(), np.zeros(1, layout.LEAF_PACKET)
             self.bounds = (np.zeros(3), np.zeros(3))
+        self.scene_leaves, self.shadow_root, self.hull = len(leaves), 0, None
+        if len(codes) and not self.scene.instances and len(codes) <= hull.MAX_PRIMITIVES:
+            nodes, leaves = self._shadow_tree(nodes, leaves, codes, lo, hi, tri_v, spheres, opaque)
         self.bvh_seconds = time.perf_counter() - t0
         self.triangle_count = ntri
         self.arrays.update(nodes=nodes, leaves=leaves, triangles=tris, normals=normals, spheres=spheres,
                            cylinders=cylinders, tri_uvs=tri_uvs, uv_maps=self._uv_maps())
+
+    def _shadow_tree(self, nodes, leaves, codes, lo, hi, tri_v, spheres, opaque):
+        """The scene's tree followed by a second one without the faces of its convex hull
+        (volcl.hull), for shadow rays from surfaces (RenderParams.shadow_root, set by _params where
+        every point and spot light lies in the hull); unchanged where no face qualifies."""
+        ntri, n_sph = len(tri_v), len(self.sphere_shapes)
+        tri32 = np.asarray(tri_v, np.float32)
+        cyl = slice(ntri + n_sph, None)
+        faces, planes, tol = hull.hull_faces(tri32, spheres["center"][:n_sph], spheres["radius"][:n_sph],
+                                             lo[cyl], hi[cyl])
+        if not faces.any():
+            return nodes, leaves
+        keep = np.concatenate([~faces, np.ones(len(codes) - ntri, bool)])
+        if keep.any():
+            s_nodes, s_leaves = device_bvh(codes[keep], lo[keep], hi[keep], tri_v, opaque[keep],
+                                           max_leaf=self.max_leaf)
+        else:
+            s_nodes, s_leaves = empty_wide(), np.zeros(1, layout.LEAF_PACKET)
+        self.shadow_root, self.hull = len(nodes), (np.flatnonzero(faces), planes, tol)
+        return (np.concatenate([nodes, relocate(s_nodes, len(nodes), len(leaves))]),
+                np.concatenate([leaves, s_leaves]))
 
     def _instanced_bvh(self, codes, lo, hi, tri_v, opaque, prim_shape):
         """The two-level BVH (volcl.bvh_instanced) of a scene with instances; sets self.bounds to
@@ -618,7 +648,17 @@ class Packer:
         params["scene_center"] = 0.5 * (lo + hi)
         params["scene_radius"] = 0.5 * float(np.linalg.norm(hi - lo))
         params["camera_walk"] = int(self._camera_walk(params["scene_radius"]))
+        params["shadow_root"] = self.shadow_root if self._lights_in_hull() else 0
         return params
+
+    def _lights_in_hull(self) -> bool:
+        """Whether every point and spot light lies in the convex hull whose faces the shadow tree
+        leaves out (volcl.hull): a light outside it sends shadow rays through those faces."""
+        if self.hull is None:
+            return False
+        _, planes, tol = self.hull
+        at = [np.asarray(e.position, np.float32) for e in self.scene.emitters if e.kind in ("point", "spot")]
+        return hull.inside(at, planes, tol)
 
     def _camera_walk(self, scene_radius: float) -> bool:
         """Whether a surface may lie where camera rays are walked to the near clip plane: if none can,

@@ -114,6 +114,18 @@ def surface_stage_pays(device) -> bool:
     return device.kind == "cpu" and "intel" in device.platform_name.lower()
 
 
+def scene_leaves(packed) -> np.ndarray:
+    """The leaf packets of the scene's tree (the shadow tree's follow them: volcl.hull)."""
+    return packed.arrays["leaves"][:packed.scene_leaves]
+
+
+def hull_skip(packed, count: int) -> int:
+    """A mask of the tested triangles (in packet order) that shadow rays from surfaces skip: the
+    faces of the scene's convex hull, where the megakernel leaves them out too (volcl.hull)."""
+    _, codes = _tiny_triangles(packed, count)
+    return int(np.sum(1 << np.flatnonzero(np.isin(codes, packed.hull_faces))))
+
+
 def _used_lanes(leaves) -> np.ndarray:
     """(packets, lanes) mask of the leaf packets' triangle lanes (unused lanes hold the zero
     triangle, analytic ones a negative code)."""
@@ -125,7 +137,7 @@ def tiny_lanes(packed, features: dict) -> tuple[int, int, int]:
     (triangles, a mask of those that end a leaf packet, spheres): at most TINY_LANES triangles and
     TINY_SPHERES spheres, every primitive opaque (so a shadow ray is blocked by any hit); else
     (0, 0, 0)."""
-    leaves = packed.arrays["leaves"]
+    leaves = scene_leaves(packed)
     used = _used_lanes(leaves)
     spheres = leaves["prim"] < 0
     count, n_spheres = int(used.sum()), int(spheres.sum())
@@ -153,7 +165,7 @@ def _library_normals(p0, p1, p2):
 
 def _tiny_triangles(packed, count):
     """The tested triangles' corners (count, 3, 3) and primitive codes, in packet order."""
-    leaves = packed.arrays["leaves"]
+    leaves = scene_leaves(packed)
     used = _used_lanes(leaves)
     return leaves["v"].transpose(0, 2, 1)[used].reshape(count, 3, 3), leaves["prim"][used]
 
@@ -234,7 +246,7 @@ def lanes_table(packed, tiny: int = 0, spheres: int = 0, surface: bool = False) 
             tri[15:18, :, 0] = bsdf["color"].T
             tri[18, :, 0] = bsdf["twosided"] != 0
     if spheres:
-        leaves = packed.arrays["leaves"]
+        leaves = scene_leaves(packed)
         code = leaves["prim"][leaves["prim"] < 0]
         rec = packed.arrays["spheres"][-code - 1]
         sph[0:3, :, 0] = rec["center"].T
@@ -302,8 +314,9 @@ class Wavefront:
         self.surface = not features.get("MEDIA")
         self.tiny, ends, spheres = tiny_lanes(packed, features) if tiny or self.surface else (0, 0, 0)
         light_tris = len(_light_triangles(packed)[0]) if self.surface else 0
+        skip = hull_skip(packed, self.tiny) if self.surface and self.tiny else 0
         extra = (f"-DVOLCL_WF_TINY={self.tiny}", f"-DVOLCL_WF_TINY_ENDS={ends}", f"-DVOLCL_WF_SPHERES={spheres}",
-                 f"-DVOLCL_WF_LIGHT_TRIS={light_tris}") if self.tiny else ()
+                 f"-DVOLCL_WF_LIGHT_TRIS={light_tris}", f"-DVOLCL_WF_HULL_SKIP={skip}") if self.tiny else ()
         program = device.program(features, SCALAR_FILE, extra)
         self.scalar = cl.Kernel(program, "wavefront_scalar")
         self.add = cl.Kernel(program, "wavefront_add")

@@ -46,7 +46,7 @@ VOLCL_KERNEL void shadow_rays(SCENE_ARGS, __global const float *rays, __global f
     __global const float *r = rays + 7 * (i % nrays);
     Rng rng = rng_init(seed, (uint)(i % nrays), (uint)(i / nrays));
     uint cut = 0u;
-    float3 tr = shadow_transmittance(&sc, vload3(0, r), vload3(1, r), r[6], medium, &rng, &cut);
+    float3 tr = shadow_transmittance(&sc, 0, vload3(0, r), vload3(1, r), r[6], medium, &rng, &cut);
     vstore3(tr, i, out);
     cutoffs[i] = cut;
 }
