@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .bvh_instanced import box_corners
+
 # Scenes with more primitives get no second tree: the test is an all-pairs one (triangles against
 # points), and a big mesh gains little from skipping a few walls its rays rarely reach.
 MAX_PRIMITIVES = 1024
@@ -36,9 +38,8 @@ def hull_faces(tri_v, centers=(), radii=(), box_lo=(), box_hi=()):
     centers = np.asarray(centers, np.float64).reshape(-1, 3)
     radii = np.asarray(radii, np.float64).reshape(-1)
     lo, hi = np.asarray(box_lo, np.float64).reshape(-1, 3), np.asarray(box_hi, np.float64).reshape(-1, 3)
-    bits = ((np.arange(8)[:, None] >> np.arange(3)) & 1).astype(bool)          # a box's 8 corners
-    corners = np.where(bits[None], hi[:, None], lo[:, None]).reshape(-1, 3)
-    points = np.unique(np.concatenate([tri.reshape(-1, 3), corners]), axis=0)
+    corners = [box_corners(l, h) for l, h in zip(lo, hi)]
+    points = np.unique(np.concatenate([tri.reshape(-1, 3), *corners]), axis=0)
     reach = max(float(np.abs(points).max(initial=0.0)),
                 float((np.abs(centers).max(axis=1) + radii).max(initial=0.0)) if len(radii) else 0.0)
     tol = TOLERANCE * reach
