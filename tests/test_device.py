@@ -23,6 +23,23 @@ def test_device_index_out_of_range():
         devmod.choose("99:99")
 
 
+def test_a_name_selector_takes_platform_matches_first():
+    """On an Intel CPU, PoCL's device is named after the CPU ("pthread-...-Intel(R) Xeon(R)"): a
+    selector that names a platform takes that platform's devices before devices that merely carry
+    the word in their names, whatever order the loader lists them in."""
+    def dev(p, name, platform):
+        return devmod.Device(p, 0, SimpleNamespace(name=name), platform)
+    pocl = dev(0, "pthread-skylake-avx512-Intel(R) Xeon(R) Processor", "Portable Computing Language")
+    intel = dev(1, "Intel(R) Xeon(R) Processor", "Intel(R) OpenCL")
+    amd = dev(2, "AMD EPYC 7R13", "Portable Computing Language")
+    for order in ([pocl, intel, amd], [intel, amd, pocl]):
+        assert devmod._match(order, "intel")[0] is intel
+        assert set(devmod._match(order, "Intel")) == {pocl, intel}
+        assert devmod._match(order, "portable") == [d for d in order if d is not intel]
+        assert devmod._match(order, "EPYC") == [amd]
+        assert devmod._match(order, "1:0") == [intel]
+
+
 def _small_device(global_mem, max_alloc):
     dev = SimpleNamespace(name="Tiny Test Device", global_mem_size=global_mem, max_mem_alloc_size=max_alloc)
     return devmod.DeviceInfo(7, 3, dev, "test platform")

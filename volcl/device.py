@@ -207,7 +207,11 @@ def _match(devs: list[Device], sel: str) -> list[Device]:
         return [d for d in devs if d.key == sel]
     if sel.isdigit():
         return [d for d in devs if d.key == f"0:{sel}"]
-    return [d for d in devs if sel.lower() in d.name.lower() or sel.lower() in d.platform_name.lower()]
+    # platforms first: a CPU's model name ("Intel(R) Xeon(R)") is also in other runtimes' device
+    # names, and --device Intel means Intel's runtime before PoCL's device on that CPU
+    s = sel.lower()
+    by_platform = [d for d in devs if s in d.platform_name.lower()]
+    return by_platform + [d for d in devs if s in d.name.lower() and d not in by_platform]
 
 
 def choose(selector: str | None = None) -> Device:
