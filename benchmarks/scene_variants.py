@@ -24,7 +24,6 @@ import copy
 import os
 import sys
 import tempfile
-import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -32,6 +31,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE))
 from common import cpu_model, log  # noqa: E402
+from render_throughput import volcl_render_alone  # noqa: E402
 
 WRAPPERS = ("normalmap", "bumpmap")
 ROUGH = ("roughplastic", "roughconductor", "roughdielectric")
@@ -50,7 +50,7 @@ def plain_textures(bsdf):
     """Constants for the textures of `bsdf` and of the bsdfs nested in it, in place; a normal or
     bump map wrapper is replaced by its inner bsdf (returned)."""
     while bsdf.get("type") in WRAPPERS:
-        bsdf = copy.deepcopy(bsdf.find("bsdf"))
+        bsdf = bsdf.find("bsdf")
     for parent in bsdf.iter("bsdf"):        # bsdf itself first
         for i, child in enumerate(list(parent)):
             if child.tag != "texture":
@@ -99,7 +99,7 @@ def diffuse(_bsdf):
 
 def has_texture(shape) -> bool:
     bsdf = shape.find("bsdf")
-    return bsdf is not None and (bsdf.get("type") in WRAPPERS or any(True for _ in bsdf.iter("texture")))
+    return bsdf is not None and (bsdf.get("type") in WRAPPERS or bsdf.find(".//texture") is not None)
 
 
 def variants(tree) -> list[tuple[str, ET.ElementTree]]:
@@ -118,6 +118,20 @@ def variants(tree) -> list[tuple[str, ET.ElementTree]]:
     out.append(("plain textures, Beckmann with sample_visible false",
                 edited((plain_textures, None), (lambda b: set_rough(b, visible=False), None))))
     out.append(("every bsdf diffuse", edited((diffuse, None))))
+    return out
+
+
+def write_variants(scene: Path, folder: Path) -> list[tuple[str, Path]]:
+    """(label, file) of every variant of `scene`, written into `folder` beside links to the scene
+    folder's subfolders (textures, meshes), so that relative file names resolve."""
+    for entry in scene.parent.iterdir():
+        if entry.is_dir():
+            os.symlink(entry, folder / entry.name)
+    out = []
+    for k, (label, tree) in enumerate(variants(ET.parse(scene))):
+        path = folder / f"variant{k}.xml"
+        tree.write(path)
+        out.append((label, path))
     return out
 
 
@@ -141,12 +155,7 @@ def main(argv=None):
           + "".join(f" | {n}/{names[0]}" for n in names[1:]) + " |")
     print("|---|" + "---|" * (2 * len(names) - 1))
     with tempfile.TemporaryDirectory() as tmp:
-        for entry in scene.parent.iterdir():        # textures and meshes, found beside the copies
-            if entry.is_dir():
-                os.symlink(entry, Path(tmp) / entry.name)
-        for k, (label, tree) in enumerate(variants(ET.parse(scene))):
-            path = Path(tmp) / f"variant{k}.xml"
-            tree.write(path)
+        for label, path in write_variants(scene, Path(tmp)):
             log(label)
             model = volcl.load_file(str(path), width=w, height=h)
             renderers = [Renderer(model, device=d, engine="megakernel") for d in devices]
@@ -155,10 +164,7 @@ def main(argv=None):
             best = [float("inf")] * len(renderers)
             for _ in range(args.rounds):
                 for i, r in enumerate(renderers):
-                    r.reset()
-                    t0 = time.perf_counter()
-                    r.render(args.spp)
-                    best[i] = min(best[i], time.perf_counter() - t0)
+                    best[i] = min(best[i], volcl_render_alone(r, args.spp)[0])
             rates = [w * h * args.spp / b / 1e6 for b in best]
             print(f"| {label} | " + " | ".join(f"{x:.3f}" for x in rates)
                   + "".join(f" | {x / rates[0]:.2f}" for x in rates[1:]) + " |", flush=True)

@@ -1,7 +1,7 @@
 """benchmarks/scene_variants.py: each variant of textured_cbox takes away what its label says, and
 volcl reads every one."""
-import os
 import sys
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
@@ -17,17 +17,9 @@ SCENE = ROOT / "scenes" / "textured_cbox.xml"
 
 @pytest.fixture(scope="module")
 def written(tmp_path_factory):
-    import xml.etree.ElementTree as ET
-    tmp = tmp_path_factory.mktemp("variants")
-    for entry in SCENE.parent.iterdir():
-        if entry.is_dir():
-            os.symlink(entry, tmp / entry.name)
-    out = {}
-    for k, (label, tree) in enumerate(scene_variants.variants(ET.parse(SCENE))):
-        path = tmp / f"variant{k}.xml"
-        tree.write(path)
-        out[label] = (path, tree.getroot())
-    return out
+    """label: (file, its root element as read back)"""
+    files = scene_variants.write_variants(SCENE, tmp_path_factory.mktemp("variants"))
+    return {label: (path, ET.parse(path).getroot()) for label, path in files}
 
 
 def bsdf_types(root):
