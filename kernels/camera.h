@@ -15,6 +15,7 @@
 #ifndef VOLCL_CAMERA_H
 #define VOLCL_CAMERA_H
 
+VOLCL_STEP_INLINE
 inline void camera_ray(const SceneData *sc, __global const float *filter_table, int px, int py, float2 u,
                        float2 u_lens, float3 *o, float3 *d, float *t_max) {
     __global const RenderParams *rp = sc->params;

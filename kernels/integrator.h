@@ -35,6 +35,7 @@ inline int medium_after(const SceneData *sc, const SurfacePoint *s, float3 w, in
  * rejects), sent all its rays on in the wrong medium. So the clipped part is walked from a little
  * behind the pinhole, and every boundary crossed on it applies (surfaces there are clipped away,
  * as in Mitsuba); a crossing right at the near plane moves the origin past it. */
+VOLCL_STEP_INLINE
 inline int camera_start_medium(const SceneData *sc, float3 *o, float3 d, float *t_max, int medium) {
 #if VOLCL_HAS_MEDIUM_BOUNDARIES
     __global const RenderParams *rp = sc->params;
@@ -71,6 +72,7 @@ inline int camera_start_medium(const SceneData *sc, float3 *o, float3 d, float *
  * length of its last medium segment, from the boundary it entered that medium at (emission NEE).
  * `root`: the tree traced (bvh_trace_in): 0, or surface_shadow_root's for a segment between two
  * points of the scene. */
+VOLCL_STEP_INLINE
 inline float3 shadow_transmittance_to(const SceneData *sc, int root, float3 o, float3 w, float t_max, int medium,
                                       Rng *rng, uint *cutoffs, int *end_medium, float *last_segment) {
     *end_medium = -2;       /* no medium: the segment was blocked before its end */
@@ -120,6 +122,7 @@ inline float3 shadow_transmittance_to(const SceneData *sc, int root, float3 o, f
 }
 
 /* The same, where the caller does not need to know in which medium the segment ends. */
+VOLCL_STEP_INLINE
 inline float3 shadow_transmittance(const SceneData *sc, int root, float3 o, float3 w, float t_max, int medium,
                                    Rng *rng, uint *cutoffs) {
     int end_medium;
@@ -216,6 +219,7 @@ inline float hit_weight(__global const RenderParams *rp, float pdf_scatter, floa
 /* Light arriving at a vertex by next-event estimation, already weighted by MIS against `scatter_pdf`.
  * `f` is the vertex's scattering value towards ls.wi (BSDF value * cos, or phase value); `root`
  * the tree its shadow ray is traced in (shadow_transmittance_to). */
+VOLCL_STEP_INLINE
 inline float3 nee_contribution(const SceneData *sc, int root, const LightSample *ls, float3 f, float scatter_pdf,
                                float3 origin, int medium, Rng *rng, uint *cutoffs) {
     /* stop a hair before the light so the shadow ray never hits the emitter itself */
@@ -391,6 +395,7 @@ typedef struct {
 /* The ray's segment through its medium: equiangular sampling towards point lights, then a free
  * flight; at a scattering event, next-event estimation against phase sampling and a new
  * direction from the phase function. */
+VOLCL_STEP_INLINE
 inline int path_medium_event(const SceneData *sc, Rng *rng, PathState *ps, bool hit, const Hit *h, uint *cutoffs) {
 #if VOLCL_HAS_MEDIA
     __global const RenderParams *rp = sc->params;
@@ -479,6 +484,7 @@ inline int path_medium_event(const SceneData *sc, Rng *rng, PathState *ps, bool 
 }
 
 /* The ray left the scene: the environment's light, weighted by MIS against light sampling. */
+VOLCL_STEP_INLINE
 inline void path_escape(const SceneData *sc, PathState *ps) {
 #if VOLCL_HAS_ENV_LIGHTS
     __global const RenderParams *rp = sc->params;
@@ -492,6 +498,7 @@ inline void path_escape(const SceneData *sc, PathState *ps) {
 }
 
 /* A bare (null) boundary: the ray goes on unchanged, possibly into another medium. */
+VOLCL_STEP_INLINE
 inline void path_null_crossing(const SceneData *sc, PathState *ps, const SurfacePoint *s) {
     ps->medium = medium_after(sc, s, ps->d, ps->medium);
     float3 next = offset_origin(s->p, s->mag, s->ng, ps->d);
@@ -502,6 +509,7 @@ inline void path_null_crossing(const SceneData *sc, PathState *ps, const Surface
 
 /* Next-event estimation at a surface vertex, MIS against BSDF sampling. Delta BSDFs draw the same
  * random numbers without using them, so the sequence stays aligned whatever the vertex type. */
+VOLCL_STEP_INLINE
 inline void path_surface_nee(const SceneData *sc, Rng *rng, PathState *ps, const SurfacePoint *s,
                              const BsdfVertex *bsdf, float3 wo, bool delta, uint *cutoffs) {
     if (ps->do_nee && !delta) {
@@ -539,6 +547,7 @@ inline void path_surface_nee(const SceneData *sc, Rng *rng, PathState *ps, const
 
 /* The ray reached a surface (or escaped): emission found by the last sampled direction, then a
  * null crossing, or a scattering vertex with next-event estimation and a BSDF-sampled direction. */
+VOLCL_STEP_INLINE
 inline int path_surface_event(const SceneData *sc, Rng *rng, PathState *ps, bool hit, const Hit *h, uint *cutoffs) {
     __global const RenderParams *rp = sc->params;
     if (!hit) {
@@ -613,6 +622,7 @@ inline int path_surface_event(const SceneData *sc, Rng *rng, PathState *ps, bool
 
 /* Russian roulette from rr_depth on: survival follows the throughput (undoing refraction's
  * 1/eta^2), capped so paths end even when the albedo is exactly 1. False: the path ends. */
+VOLCL_STEP_INLINE
 inline bool path_roulette(const SceneData *sc, Rng *rng, PathState *ps) {
     if (max_component(ps->beta) <= 0.0f) return false;
     if (ps->depth >= sc->params->rr_depth) {
@@ -624,6 +634,7 @@ inline bool path_roulette(const SceneData *sc, Rng *rng, PathState *ps) {
 }
 
 /* The state of a path that starts with the camera ray o + t d, t < t_max. */
+VOLCL_STEP_INLINE
 inline PathState path_start(const SceneData *sc, float3 o, float3 d, float t_max) {
     __global const RenderParams *rp = sc->params;
     PathState ps;
@@ -646,6 +657,7 @@ inline PathState path_start(const SceneData *sc, float3 o, float3 d, float t_max
 /* Radiance arriving at o from direction -d. *cutoffs counts segments whose tracking hit its bound.
  * Each step traces the ray, lets the medium act on its segment (path_medium_event) and, where the
  * ray gets through, the surface it reaches (path_surface_event). */
+VOLCL_STEP_INLINE
 inline float3 integrator_radiance(const SceneData *sc, Rng *rng, float3 o, float3 d, float t_max, uint *cutoffs) {
     PathState ps = path_start(sc, o, d, t_max);
     for (int step = 0; step < VOLCL_MAX_STEPS; ++step) {

@@ -36,6 +36,7 @@ typedef struct {
                          * variate (the distance pdf over sigma_t without an exp); else -1 */
 } MediumSample;
 
+VOLCL_STEP_INLINE
 inline MediumSample medium_sample_distance(__global const Medium *m, float t_max, float3 beta,
                                            float u_channel, float u_dist) {
     MediumSample ms;
@@ -81,6 +82,7 @@ inline MediumSample medium_sample_distance(__global const Medium *m, float t_max
     return ms;
 }
 
+VOLCL_STEP_INLINE
 inline float3 medium_transmittance(__global const Medium *m, float t) {
     return transmittance_exp(vload_f3(m->sigma_t), t);
 }
@@ -225,6 +227,7 @@ inline int majorant_walk_next(const SceneData *sc, __global const GridVolume *v,
     }
 }
 
+VOLCL_STEP_INLINE
 inline MediumSample medium_grid_sample_distance(const SceneData *sc, __global const Medium *m, float3 o,
                                                 float3 d, float t_max, float3 beta, Rng *rng,
                                                 uint *cutoffs, const EmissionMis *em) {
@@ -291,6 +294,7 @@ inline MediumSample medium_grid_sample_distance(const SceneData *sc, __global co
 /* `tr` times a ratio-tracking estimate of the transmittance of the segment [0, t_max]. Russian
  * roulette acts on the product, so a shadow ray through several media stops once the light it
  * could still carry is small; survival probability max(T) / 0.05 keeps the estimate unbiased. */
+VOLCL_STEP_INLINE
 inline float3 medium_grid_transmittance(const SceneData *sc, __global const Medium *m, float3 o, float3 d,
                                         float t_max, float3 tr, Rng *rng, uint *cutoffs) {
     __global const GridVolume *v = &sc->grids[m->sigma_t_grid];
@@ -317,6 +321,7 @@ inline float3 medium_grid_transmittance(const SceneData *sc, __global const Medi
 #endif
 
 /* Free flight through medium m from o along d, up to t_max (the next surface or the ray's end). */
+VOLCL_STEP_INLINE
 inline MediumSample medium_sample(const SceneData *sc, __global const Medium *m, float3 o, float3 d,
                                   float t_max, float3 beta, Rng *rng, uint *cutoffs, const EmissionMis *em) {
 #if VOLCL_HAS_GRID_MEDIA
@@ -327,6 +332,7 @@ inline MediumSample medium_sample(const SceneData *sc, __global const Medium *m,
 }
 
 /* tr times the transmittance (or an unbiased estimate of it) of medium m along o + t d, t in [0, t_max]. */
+VOLCL_STEP_INLINE
 inline float3 medium_attenuate(const SceneData *sc, __global const Medium *m, float3 o, float3 d, float t_max,
                                float3 tr, Rng *rng, uint *cutoffs) {
 #if VOLCL_HAS_GRID_MEDIA

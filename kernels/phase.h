@@ -62,6 +62,7 @@ inline float phase_hg_eval_dirs(float g, float3 d_in, float3 d_out) {
 #endif
 
 /* The phase value towards d_out; *pdf: the density phase_sample gives d_out. */
+VOLCL_STEP_INLINE
 inline float phase_eval_pdf(const SceneData *sc, __global const Medium *m, float3 d_in, float3 d_out,
                             float *pdf) {
 #if VOLCL_HAS_PHASE_FAMILIES
@@ -85,6 +86,7 @@ inline float phase_eval(const SceneData *sc, __global const Medium *m, float3 d_
 
 /* New travel direction after scattering from d_in, from the uniform pair u (and, for phase
  * functions that need more random numbers, rng); returns its pdf, *weight = value / pdf. */
+VOLCL_STEP_INLINE
 inline float phase_sample(const SceneData *sc, __global const Medium *m, float3 d_in, float2 u, Rng *rng,
                           float3 *d_out, float *weight) {
 #if VOLCL_HAS_PHASE_FAMILIES

@@ -15,6 +15,7 @@
 #include "renderer.h"
 
 /* One sample of pixel (px, py) (index `pixel` in the image), added to accumulator entry `out`. */
+VOLCL_STEP_INLINE
 inline void render_sample(const SceneData *sc, __global const float *filter_table, int px, int py, int pixel,
                           uint sample, int out, __global float4 *sums, __global float4 *sums_sq,
                           __global uint *invalid, __global uint *cutoffs) {

@@ -6,6 +6,7 @@
 
 /* The random stream of sample `sample` of pixel (px, py) (index `pixel` in the image), and its camera
  * ray o + t d, t < t_max. */
+VOLCL_STEP_INLINE
 inline void sample_camera_ray(const SceneData *sc, __global const float *filter_table, int px, int py, int pixel,
                               uint sample, Rng *rng, float3 *o, float3 *d, float *t_max) {
     *rng = rng_init(sc->params->seed, (uint)pixel, sample);

@@ -82,6 +82,7 @@ inline int sample_discrete_cdf_guided(const __global float *cdf, const __global 
  * After the CDF come size - 1 guide entries: entry i is the first interval whose CDF passes
  * i / (size - 1), so finding u's interval takes a step or two instead of a binary search (which
  * cost a fifth of a Cornell-box sample on PoCL). */
+VOLCL_STEP_INLINE
 inline float sample_filter_offset(const __global float *table, int size, float radius, float u) {
     int n = size - 1;
     /* interval k ends at the first CDF entry past table[0] = 0 that lies above u */
@@ -103,6 +104,7 @@ inline float filter_cdf_at(const __global float *table, int size, float radius, 
  * sample_border) and Nori's draw no samples outside the image, so a pixel within the filter's
  * radius of the edge averages only the part of its filter that lies inside. Mapping u into that
  * part's share of the CDF samples the table's own distribution restricted to it. */
+VOLCL_STEP_INLINE
 inline float sample_filter_offset_within(const __global float *table, int size, float radius, float u,
                                          float lo, float hi) {
     if (lo <= -radius && hi >= radius) return sample_filter_offset(table, size, radius, u);
