@@ -40,13 +40,16 @@
  * SurfacePoint, Hit) through memory at every call: forcing these inline made the megakernel
  * 4-15% faster on PoCL and up to 9% on Intel's runtime with the same bits (README, "Inlining the
  * path's steps"). Forcing every function inline gained a little more but made a build take 5-35x
- * as long; the BSDFs, textures and the BVH walk gained nothing. Optimized builds only: at -O0 a
+ * as long; the BSDFs, textures and the BVH walk gained nothing. The wavefront renderer's scalar
+ * stage keeps them out of line (wavefront.cl). Optimized builds only: at -O0 a
  * forced inline of a struct-returning function emits an intrinsic Oclgrind cannot run
  * (surface.h). */
+#ifndef VOLCL_STEP_INLINE
 #ifdef __OPTIMIZE__
 #define VOLCL_STEP_INLINE __attribute__((always_inline))
 #else
 #define VOLCL_STEP_INLINE
+#endif
 #endif
 
 inline float3 vload_f3(const __global float *p) { return (float3)(p[0], p[1], p[2]); }
