@@ -37,13 +37,12 @@
 #endif
 
 /* A step of the path tracer that PoCL kept out of line, passing the path's state (PathState,
- * SurfacePoint, Hit) through memory at every call: forcing these inline made the megakernel
- * 4-15% faster on PoCL and up to 9% on Intel's runtime with the same bits (README, "Inlining the
- * path's steps"). Forcing every function inline gained a little more but made a build take 5-35x
- * as long; the BSDFs, textures and the BVH walk gained nothing. The wavefront renderer's scalar
- * stage keeps them out of line (wavefront.cl). Optimized builds only: at -O0 a
- * forced inline of a struct-returning function emits an intrinsic Oclgrind cannot run
- * (surface.h). */
+ * SurfacePoint, Hit) through memory at every call: forcing these inline made PoCL's megakernel
+ * 1-20% faster with the same bits (README, "Inlining the path's steps"). Forcing every function
+ * inline gained a little more but made a first build take 3-33x as long; the BSDFs, textures and
+ * the BVH walk gained nothing. The wavefront renderer's scalar stage keeps them out of line
+ * (wavefront.cl). Optimized builds only: at -O0 a forced inline of a struct-returning function
+ * emits an intrinsic Oclgrind cannot run (surface.h). */
 #ifndef VOLCL_STEP_INLINE
 #ifdef __OPTIMIZE__
 #define VOLCL_STEP_INLINE __attribute__((always_inline))
