@@ -204,3 +204,35 @@ def test_moment_layer_sensor_choice_and_scene_spp_under_a_time_limit(tmp_path):
     assert img.shape[:2] == (4, 5) and attrs["volcl:spp"] == 2
     r = volcl("render", scene, "-o", out, "--sensor", 2, "-q")
     assert r.returncode == 2 and "0 to 1" in r.stderr
+
+
+def _leave_run(body, tmp_path):
+    """A Python process that runs `body` and then volcl.cli.leave(3); its result."""
+    code = "import atexit, sys, threading, time\nfrom volcl.cli import leave\n" + body + "\nleave(3)\n"
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    return subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=60)
+
+
+def test_leaving_runs_the_exit_handlers_and_keeps_the_status(tmp_path):
+    # the process skips Python's teardown, not what libraries registered to run at exit
+    r = _leave_run("atexit.register(lambda: open('handler', 'w').write('ran'))\nprint('out', end='')", tmp_path)
+    assert r.returncode == 3
+    assert r.stdout == "out"        # buffered output is flushed
+    assert (tmp_path / "handler").read_text() == "ran"
+
+
+def test_leaving_waits_for_a_working_thread(tmp_path):
+    body = ("def work():\n    time.sleep(0.5)\n    open('thread', 'w').write('done')\n"
+            "threading.Thread(target=work).start()")
+    r = _leave_run(body, tmp_path)
+    assert r.returncode == 3
+    assert (tmp_path / "thread").read_text() == "done"
+
+
+def test_volcl_command_ends_with_the_status_of_main(tmp_path):
+    ok = volcl("render", ROOT / "scenes" / "cbox.xml", "--spp", 1, "--width", 8, "--height", 8, "-o", tmp_path / "a.exr",
+                 "-q", cwd=tmp_path)
+    assert ok.returncode == 0 and (tmp_path / "a.exr").is_file()
+    bad = volcl("render", tmp_path / "missing.xml", cwd=tmp_path)
+    assert bad.returncode == 2 and "missing.xml" in bad.stderr
