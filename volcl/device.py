@@ -24,6 +24,11 @@ from .program import ENTRY_FILE, ProgramCache, program_key
 
 # the --device value for every device volcl may render on (a render on several devices, volcl.rounds)
 ALL = "all"
+# Work-group size of every launch (where the device and kernel allow it), the global size rounded up
+# to a multiple of it (the kernel ignores the items past the end): drivers that compile a kernel
+# per work-group size (PoCL does, and picks a size from the global size when given none) then
+# compile once, however many sizes of tiles and launches a render has.
+GROUP_ITEMS = 64
 INSTALL_HINT = ("install an OpenCL driver, e.g. on Debian: apt-get install pocl-opencl-icd "
                 "(and binutils, which PoCL needs to link kernels)")
 
@@ -346,3 +351,15 @@ def check_fits(info: Device, buffers: dict[str, int], accumulator_bytes: int = 0
                          f"image accumulators need {_size(total)} ({total} bytes), but the device has "
                          f"{_size(global_mem)} ({global_mem} bytes) of global memory; simplify the scene "
                          f"or lower the resolution, or choose a device with more memory (--device)" + notes)
+
+
+def group_items(kernels, device) -> int:
+    """GROUP_ITEMS, or the largest power of two below it that every one of `kernels` runs with on
+    the OpenCL device `device`."""
+    limit = int(device.max_work_group_size)
+    for kernel in kernels:
+        limit = min(limit, int(kernel.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, device)))
+    n = GROUP_ITEMS
+    while n > limit:
+        n //= 2
+    return max(n, 1)

@@ -120,10 +120,11 @@ def _build_log_path() -> Path:
     return Path(os.environ.get("POCL_CACHE_DIR", ".")).parent / "builds.json"
 
 
-def note_build(device_name: str, features: dict[str, bool], seconds: float) -> tuple[float, bool]:
-    """Remember the first (cold) build time of each kernel version, feature set and device, so a
-    later warm build can be shown beside it. Returns (cold seconds, whether this build was it)."""
-    key = f"{sources_hash()} {device_name} {feat.describe(features)}"
+def note_build(device_name: str, features: dict[str, bool], seconds: float, engine: str = "") -> tuple[float, bool]:
+    """Remember the first (cold) build time of each kernel version, feature set, device and engine
+    (the megakernel's: "", or "wavefront"), so a later warm build can be shown beside it. Returns
+    (cold seconds, whether this build was it)."""
+    key = f"{sources_hash()} {device_name} {feat.describe(features)}" + (f" {engine}" if engine else "")
     path = _build_log_path()
     try:
         log = json.loads(path.read_text())

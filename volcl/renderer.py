@@ -33,7 +33,7 @@ from .grids import grid_cost_notes
 from .opencl import cl
 from .pack import ARG_ORDER
 from .prepared import Scene as PreparedScene
-from .program import note_build, sources_hash
+from .program import ENTRY_FILE, note_build, sources_hash
 from .result import RenderResult
 from .scene.model import Scene as ModelScene
 from .tiles import MIN_ITEMS, Tile, accumulator_slots, slice_state
@@ -48,11 +48,6 @@ _DEFAULT = object()
 # Samples per pixel before a target error is trusted: with fewer, a pixel whose rare bright paths
 # have not turned up yet reports a small variance along with its small mean (README, "Accuracy").
 MIN_SPP_FOR_ERROR = 16
-# Work-group size of every launch (where the device and kernel allow it), the global size rounded up
-# to a multiple of it (the kernel ignores the items past the end): drivers that compile a kernel
-# per work-group size (PoCL does, and picks a size from the global size when given none) then
-# compile once, however many sizes of tiles and launches a render has.
-GROUP_ITEMS = 64
 # On a device without a launch time budget (CPUs), render() runs several whole rounds of the slots
 # in one launch once it knows how long a round takes, up to this long, so that a time limit, an
 # interrupt or the progress bar waits little for the launch under way. A pass of its own costs a
@@ -103,12 +98,19 @@ class Renderer:
                           accumulator_bytes=ACCUMULATOR_BYTES * max(self.slots * self.npix, MIN_ITEMS),
                           notes=grid_cost_notes(scene.packed.stats.get("sparse_grids", ())))
         self.uploaded = scene.upload(self.device)
-        self._get_program()
         ctx = self.device.ctx
         self.queue = self.device.queue
-        self.kernel = cl.Kernel(self.program, "render_pass")
-        self.group_items = _group_items(self.kernel, self.device.device)
+        # the megakernel's program only where it renders: a wavefront render never launches it
+        builds = self.device.builds
         self.wavefront = self._wavefront(engine)
+        if self.wavefront is None:
+            self.program = self.device.program(self.features)
+            self.kernel = cl.Kernel(self.program, "render_pass")
+            self.group_items = devmod.group_items([self.kernel], self.device.device)
+            self._note_builds(builds, [(ENTRY_FILE, ())])
+        else:
+            self.group_items = self.wavefront.group_items
+            self._note_builds(builds, self.wavefront.sources)
         mf = cl.mem_flags
         self.params_buffer = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=self.params.reshape(1))
         if launch_seconds is _DEFAULT:
@@ -130,16 +132,15 @@ class Renderer:
         self.spp_requested = 0
         self.reset()
 
-    def _get_program(self):
-        """The program for this render's feature set from the device's cache; a build, when this
-        render is the first to need it, is timed and logged (cold or warm, volcl.program)."""
-        builds = self.device.builds
-        self.program = self.device.program(self.features)
+    def _note_builds(self, builds: int, sources):
+        """Whether this render had programs built for it (the device's count passed `builds`), and
+        their time (programs `sources`, (source file, extra options) pairs, of this feature set),
+        logged as cold or warm (volcl.program)."""
         self.built = self.device.builds > builds
         if self.built:
-            self.build_seconds = self.device.programs.seconds(self.features)
-            self.cold_build_seconds, self.build_was_cold = note_build(self.device.name, self.features,
-                                                                      self.build_seconds)
+            self.build_seconds = sum(self.device.programs.seconds(self.features, f, extra) for f, extra in sources)
+            self.cold_build_seconds, self.build_was_cold = note_build(
+                self.device.name, self.features, self.build_seconds, "" if self.wavefront is None else "wavefront")
         else:
             self.build_seconds, self.cold_build_seconds, self.build_was_cold = 0.0, None, False
 
@@ -157,7 +158,7 @@ class Renderer:
             return None
         if engine == "auto" and not wavefront.pays(self.features, self.packed, self.params, self.device):
             return None
-        return wavefront.Wavefront(self.device, self.features, self.packed, self.group_items)
+        return wavefront.Wavefront(self.device, self.features, self.packed)
 
     @property
     def engine(self) -> str:
@@ -359,16 +360,6 @@ class Renderer:
 
     def result(self) -> RenderResult:
         return build_result(self, self.state(), self.tile)
-
-
-def _group_items(kernel, device) -> int:
-    """GROUP_ITEMS, or the largest power of two below it that the kernel runs with on `device`."""
-    limit = min(int(device.max_work_group_size),
-                int(kernel.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, device)))
-    n = GROUP_ITEMS
-    while n > limit:
-        n //= 2
-    return max(n, 1)
 
 
 def render_setup(prepared: PreparedScene, estimator: Estimator, features: dict | None = None,

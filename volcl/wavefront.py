@@ -32,6 +32,7 @@ import weakref
 
 import numpy as np
 
+from . import device as devmod
 from . import layout
 from .opencl import cl
 from .pack import ARG_ORDER
@@ -308,7 +309,8 @@ def device_state(device) -> _DeviceState:
 class Wavefront:
     """The stage kernels of one Renderer's feature set, and the loop that runs them."""
 
-    def __init__(self, device, features: dict, packed, group_items: int, paths: int = PATHS, tiny: bool = True):
+    def __init__(self, device, features: dict, packed, group_items: int | None = None, paths: int = PATHS,
+                 tiny: bool = True):
         self.device = device
         # a scene without media is the surface stage's (supported() has checked that it can take it)
         self.surface = not features.get("MEDIA")
@@ -323,6 +325,9 @@ class Wavefront:
         self.begin = cl.Kernel(program, "wavefront_begin")
         lanes_file, kernel = (SURFACE_FILE, "wavefront_surface") if self.surface else (LANES_FILE, "wavefront_medium")
         self.lanes = cl.Kernel(device.program(features, lanes_file, extra), kernel)
+        self.sources = [(SCALAR_FILE, extra), (lanes_file, extra)]     # its programs (source, extra options)
+        if group_items is None:
+            group_items = devmod.group_items([self.scalar, self.add, self.begin, self.lanes], device.device)
         self.group_items = group_items
         self.paths = -(-min(paths, STRIDE - 16) // group_items) * group_items
         self.table = cl.Buffer(device.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
