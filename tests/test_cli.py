@@ -231,8 +231,8 @@ def test_leaving_waits_for_a_working_thread(tmp_path):
 
 
 def test_volcl_command_ends_with_the_status_of_main(tmp_path):
-    ok = volcl("render", ROOT / "scenes" / "cbox.xml", "--spp", 1, "--width", 8, "--height", 8, "-o", tmp_path / "a.exr",
-                 "-q", cwd=tmp_path)
+    ok = volcl("render", ROOT / "scenes" / "cbox.xml", "--spp", 1, "--width", 8, "--height", 8,
+               "-o", tmp_path / "a.exr", "-q", cwd=tmp_path)
     assert ok.returncode == 0 and (tmp_path / "a.exr").is_file()
     bad = volcl("render", tmp_path / "missing.xml", cwd=tmp_path)
     assert bad.returncode == 2 and "missing.xml" in bad.stderr
