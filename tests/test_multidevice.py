@@ -18,6 +18,7 @@ from volcl import batch
 from volcl.devicepool import DeviceFailure, DevicePool
 from volcl.image import read_image
 from volcl.options import OutputOptions, RenderOptions, SceneOptions
+from volcl.program import ENTRY_FILE
 from volcl.renderer import Renderer
 from volcl.rounds import TiledRender, WorkersFailed
 
@@ -164,6 +165,27 @@ def test_a_slow_device_takes_fewer_tiles(pair, monkeypatch):
     result = volcl.render(load("fog.xml", width=64, height=48), spp=96, seed=1, device=pair)
     fast_share = result.shares[pair[0].label]
     assert fast_share > 0.6, result.shares
+
+
+@pytest.mark.parametrize("name, engine", [("point_in_fog.xml", "wavefront"), ("fog.xml", "megakernel")])
+def test_devices_prepare_exactly_the_programs_their_tiles_launch(name, engine, device):
+    """prepare() builds what the tiles' renderers use and nothing else: a scene "auto" gives the
+    wavefront builds the wavefront's programs, not an unused megakernel counted as build time."""
+    if device.kind != "cpu":
+        pytest.skip("the wavefront renders on CPUs only")
+    devs = [device.fresh(), device.fresh()]     # program caches of their own, empty
+    r = tiled(load(name), devs, seed=3)
+    prepared = [d.builds for d in devs]
+    r.render(6)
+    assert [d.builds for d in devs] == prepared, "a tile's renderer built a program prepare() did not"
+    renderers = [t for w in r.executor.workers for t in w.renderers.values()]
+    assert renderers and {t.engine for t in renderers} == {engine}
+    t = renderers[0]
+    used = t.wavefront.sources if t.wavefront is not None else [(ENTRY_FILE, ())]
+    for d in devs:
+        assert len(d.programs) == len(used) and all(d.has_program(r.features, f, x) for f, x in used)
+    built = sum(d.programs.seconds(r.features, f, x) for d in devs for f, x in used)
+    assert r.build_seconds == pytest.approx(built, rel=0.05, abs=0.01)    # the build time reported is theirs
 
 
 # -- the command line on two PoCL devices -------------------------------------------------------------

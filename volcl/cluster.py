@@ -235,13 +235,14 @@ def _tile_renderer(scene, spec, tile, start=0):
     if r is not None and start and r.samples_done == start:
         return r, key, True
     r = Renderer(scene, device=worker_device(), features=spec["features"], seed=spec["seed"],
-                 estimator=spec["estimator"], tile=tile)
+                 estimator=spec["estimator"], tile=tile, engine=spec["engine"])
     return r, key, False
 
 
 def warm(scene, spec) -> str:
-    """A task run once on each worker before the first round: the program built, the scene
-    uploaded, so that render time is rendering."""
+    """A task run once on each worker before the first round: the programs of the tiles' engine
+    built (a tile's Renderer builds those and no others), the scene uploaded, so that render time
+    is rendering."""
     dev = worker_device()
     _tile_renderer(scene, spec, (0, 0, 1, 1))
     return _worker_label(dev)
@@ -315,7 +316,7 @@ class DaskExecutor:
         wait_for_workers(self.client)
         self._prepares += 1
         self._spec = {"features": render.feature_override, "seed": render.seed, "estimator": render.estimator,
-                      "scene": f"{self._id}-{self._prepares}"}
+                      "engine": render.ENGINE, "scene": f"{self._id}-{self._prepares}"}
         self._prepared = render.prepared
         self._scene = self.client.scatter(render.prepared, broadcast=True, hash=False)
         futures = [self.client.submit(warm, self._scene, self._spec, workers=[addr], pure=False,

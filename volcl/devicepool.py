@@ -15,6 +15,7 @@ import threading
 import time
 import warnings
 
+from . import wavefront
 from .rounds import TileJob, TiledRender, WorkersFailed
 
 
@@ -81,16 +82,20 @@ class DevicePool:
             self._owner.clear()
 
     def prepare(self, render: TiledRender):
-        """Build the render's program and upload its scene on every device at once, before the
-        first round (so that render time is rendering, as on one device). A device that fails here
-        is retired; WorkersFailed when none is left."""
+        """Build the programs of the engine the render's tiles take (volcl.wavefront.start) and
+        upload its scene on every device at once, before the first round (so that render time is
+        rendering, as on one device). A device that fails here is retired; WorkersFailed when none
+        is left."""
         def setup(w):
             try:
-                t0 = time.perf_counter()
                 builds = w.device.builds
-                w.device.program(render.features)
+                # the tiles' renderers make the same choice and find its programs built; the
+                # Wavefront made here (a table of a few KB) is dropped, each renderer makes its own
+                _, sources = wavefront.start(render.ENGINE, render.features, render.packed, render.params, w.device)
                 if w.device.builds > builds:
-                    render.build_seconds += time.perf_counter() - t0
+                    seconds = sum(w.device.programs.seconds(render.features, f, extra) for f, extra in sources)
+                    with self._cond:    # the devices' threads add to one total
+                        render.build_seconds += seconds
                 render.prepared.upload(w.device)
             except Exception as exc:  # noqa: BLE001  (any driver failure retires the device)
                 with self._cond:

@@ -33,7 +33,7 @@ from .grids import grid_cost_notes
 from .opencl import cl
 from .pack import ARG_ORDER
 from .prepared import Scene as PreparedScene
-from .program import ENTRY_FILE, note_build, sources_hash
+from .program import note_build, sources_hash
 from .result import RenderResult
 from .scene.model import Scene as ModelScene
 from .tiles import MIN_ITEMS, Tile, accumulator_slots, slice_state
@@ -100,17 +100,16 @@ class Renderer:
         self.uploaded = scene.upload(self.device)
         ctx = self.device.ctx
         self.queue = self.device.queue
-        # the megakernel's program only where it renders: a wavefront render never launches it
+        # only the chosen engine's programs are built: a wavefront render never launches the megakernel
         builds = self.device.builds
-        self.wavefront = self._wavefront(engine)
-        if self.wavefront is None:
+        self.wavefront, sources = wavefront.start(engine, self.features, self.packed, self.params, self.device)
+        if self.wavefront is None:     # start() built its program, or found it built
             self.program = self.device.program(self.features)
             self.kernel = cl.Kernel(self.program, "render_pass")
             self.group_items = devmod.group_items([self.kernel], self.device.device)
-            self._note_builds(builds, [(ENTRY_FILE, ())])
         else:
             self.group_items = self.wavefront.group_items
-            self._note_builds(builds, self.wavefront.sources)
+        self._note_builds(builds, sources)
         mf = cl.mem_flags
         self.params_buffer = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=self.params.reshape(1))
         if launch_seconds is _DEFAULT:
@@ -143,22 +142,6 @@ class Renderer:
                 self.device.name, self.features, self.build_seconds, "" if self.wavefront is None else "wavefront")
         else:
             self.build_seconds, self.cold_build_seconds, self.build_was_cold = 0.0, None, False
-
-    def _wavefront(self, engine: str):
-        """The wavefront renderer (volcl.wavefront) where `engine` asks for it, or allows it
-        ("auto") where it supports the scene and pays; else None (the megakernel)."""
-        if engine not in wavefront.ENGINES:
-            raise VolclError(f"engine {engine!r}: expected one of {', '.join(wavefront.ENGINES)}")
-        if engine == "megakernel":
-            return None
-        why_not = wavefront.supported(self.features, self.packed, self.params, self.device)
-        if why_not is not None and engine == "wavefront":
-            raise VolclError(f"the wavefront renderer cannot render this scene: {why_not}")
-        if why_not is not None:
-            return None
-        if engine == "auto" and not wavefront.pays(self.features, self.packed, self.params, self.device):
-            return None
-        return wavefront.Wavefront(self.device, self.features, self.packed)
 
     @property
     def engine(self) -> str:

@@ -91,6 +91,11 @@ class TiledRender:
     volcl.cluster.DaskExecutor); `tile_size` (pixels, or (width, height)) defaults to
     default_tile_size."""
 
+    # the engine every tile's Renderer is asked for; executors that build programs before the
+    # first round (DevicePool.prepare, the cluster's warm task) ask for the same, so that they
+    # build what the tiles launch
+    ENGINE = "auto"
+
     def __init__(self, scene, executor, seed: int | None = None, estimator: Estimator | None = None,
                  features: dict | None = None, tile_size=None, round_seconds: float = ROUND_SECONDS):
         if isinstance(scene, ModelScene):
@@ -136,7 +141,7 @@ class TiledRender:
     def tile_renderer(self, device, tile: Tile) -> Renderer:
         """A Renderer of one of this render's tiles on `device` (a worker calls this)."""
         return Renderer(self.prepared, device=device, features=self.feature_override, seed=self.seed,
-                        estimator=self.estimator, tile=tile)
+                        estimator=self.estimator, tile=tile, engine=self.ENGINE)
 
     def tile_state(self, index: int) -> dict:
         """Tile `index`'s accumulator state (as Renderer.state gives it), copied from the image's."""

@@ -34,8 +34,10 @@ import numpy as np
 
 from . import device as devmod
 from . import layout
+from .errors import VolclError
 from .opencl import cl
 from .pack import ARG_ORDER
+from .program import ENTRY_FILE
 
 # kernels/wavefront_state.h: rows of the state arrays, their stride, the flag that a path is alive,
 # and the lanes stage's table of lights and media
@@ -106,6 +108,25 @@ def pays(features: dict, packed, params, device) -> bool:
     if int(params["camera_medium"]) < 0:
         return False
     return len(lights) > 0 and bool(np.all(lights["type"] == layout.LIGHT_TYPES["point"]))
+
+
+def start(engine: str, features: dict, packed, params, device):
+    """The engine of a render, with the programs it launches built on `device` and no others:
+    (a Wavefront, or None for the megakernel; those programs as (source file, extra options)).
+    `engine` is "megakernel", "wavefront", or "auto": the wavefront where supported() and pays().
+    A render on several devices calls this on each before its tiles' renderers do (which then
+    find the programs built)."""
+    if engine not in ENGINES:
+        raise VolclError(f"engine {engine!r}: expected one of {', '.join(ENGINES)}")
+    if engine != "megakernel":
+        why_not = supported(features, packed, params, device)
+        if why_not is not None and engine == "wavefront":
+            raise VolclError(f"the wavefront renderer cannot render this scene: {why_not}")
+        if why_not is None and (engine == "wavefront" or pays(features, packed, params, device)):
+            wf = Wavefront(device, features, packed)
+            return wf, wf.sources
+    device.program(features)
+    return None, [(ENTRY_FILE, ())]
 
 
 def surface_stage_pays(device) -> bool:
