@@ -1,0 +1,270 @@
+"""Can a surface's shading run in the SIMD lanes? textured_cbox's floor material, shaded by the
+renderer's own scalar functions and by a lanes-style rewrite, on a wave of inputs, on one device.
+
+    OPENBLAS_NUM_THREADS=1 python benchmarks/shading_lanes.py --device 0:0 \\
+        [--n 1048576] [--repeat 5] [--fresh-cache] [--remarks-dir DIR] [-D NAME=VALUE ...]
+
+The candidate design behind it (README, "Can a wavefront stage run in the SIMD lanes?"): the BVH
+walk stays scalar (benchmarks/traversal_lanes.py found no gain from running it across work-items),
+and the shading after the closest hit runs in a kernel of its own, written so that the CPU
+runtimes vectorize it across work-items. This times that shading for scenes/textured_cbox.xml's
+floor: roughplastic, GGX, alpha 0.15, diffuse reflectance from textures/tiles.png (bilinear,
+to_uv scale 2 x 4), packed as the renderer packs the scene (volcl.pack.pack). Per input: the
+bsdf's textures at uv, bsdf_eval for a light direction (value, pdf) and bsdf_sample with given
+random numbers (direction, weight, pdf), in the local shading frame (the frame change is left out
+of both kernels). Inputs: uv uniform in [0, 1)^2, wo uniform on the upper hemisphere, wi uniform
+on the upper hemisphere with every eighth one mirrored below it (a light behind the surface),
+u1 and u2 uniform in [0, 1).
+
+Kernels (benchmarks/kernels/shading_lanes.cl, one program built with the scene's features):
+  renderer  one work-item per input calling texture_eval3/texture_eval1, bsdf_eval_local and
+            bsdf_sample_local as the megakernel does, VOLCL_KERNEL (Intel's runtime keeps it scalar)
+  lanes     the same arithmetic in the lanes style (kernels/lanes.h), no vec_type_hint
+Both run in work-groups of 256 (the wave padded to a multiple), kernel time only (enqueue to
+finish), best of --repeat launches, the two kernels' launches interleaved, after one untimed launch
+each. "agree" compares every output of the lanes kernel with the renderer's: the share of inputs
+whose 12 output numbers all have identical bits, and the largest relative difference of any number
+(then per output, relative and absolute: a direction's small components make relative figures big).
+
+Vectorization is the runtime's own report: Intel's runtime's build log ("Kernel ... was successfully
+vectorized (16)"), PoCL's LLVM remarks at the first launch (POCL_VECTORIZER_REMARKS=1, printed only
+when the work-group function is compiled: --fresh-cache gives PoCL an empty cache and turns
+pyopencl's binary cache off), read by benchmarks/traversal_lanes.py's vector_verdict.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(HERE))
+from common import cpu_model, log  # noqa: E402
+from traversal_lanes import FdCapture, vector_verdict  # noqa: E402
+
+KERNEL = HERE / "kernels" / "shading_lanes.cl"
+SCENE = ROOT / "scenes" / "textured_cbox.xml"
+PAD = 256
+IN_ROWS, OUT_ROWS = 11, 12
+OUTPUTS = ("value.x", "value.y", "value.z", "pdf", "ok", "wi.x", "wi.y", "wi.z", "weight.x", "weight.y",
+           "weight.z", "sample pdf")
+KERNELS = ("renderer", "lanes")
+
+
+def floor_material(packed):
+    """The index of textured_cbox's floor bsdf in the packed records (the roughplastic of alpha 0.15
+    with a bitmap diffuse reflectance), checked against what shade_lanes is specialized to."""
+    from volcl import layout
+    a = packed.arrays
+    b, t = a["bsdfs"], a["textures"]
+    hits = [k for k in range(len(b)) if b[k]["type"] == layout.BSDF_TYPES["roughplastic"]
+            and abs(float(b[k]["alpha_u"]) - 0.15) < 1e-6 and b[k]["color_tex"] >= 0]
+    if len(hits) != 1:
+        raise SystemExit(f"expected one roughplastic floor bsdf, found {hits}")
+    k = hits[0]
+    r, tex = b[k], t[b[k]["color_tex"]]
+    checks = {
+        "ggx": r["distribution"] == layout.MICROFACETS["ggx"],
+        "visible normals": r["flags"] & layout.BSDF_FLAGS["visible"],
+        "isotropic": r["alpha_u"] == r["alpha_v"],
+        "constant roughness and specular": r["alpha_u_tex"] < 0 and r["alpha_v_tex"] < 0 and r["spec_r_tex"] < 0,
+        "bitmap": tex["type"] == layout.TEXTURE_TYPES["bitmap"],
+        "bilinear": tex["filter"] == layout.TEXTURE_FILTERS["bilinear"],
+        "3 channels": tex["channels"] == 3,
+    }
+    bad = [name for name, ok in checks.items() if not ok]
+    if bad:
+        raise SystemExit(f"the floor bsdf is not what shade_lanes handles: {bad}")
+    return k, bool(tex["lut"] >= 0)
+
+
+def make_inputs(n, seed=1):
+    """(IN_ROWS, n) float32 rows: u, v, wo.xyz, wi.xyz, u1, u2.x, u2.y (see the module's text)."""
+    rng = np.random.default_rng(seed)
+
+    def unit():     # uniform in [0, 1) with float32's 24 bits, never rounding up to 1
+        return (rng.integers(0, 1 << 24, n) / float(1 << 24)).astype(np.float32)
+
+    def hemisphere():
+        z = rng.random(n)
+        phi = 2.0 * np.pi * rng.random(n)
+        r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
+        return np.stack([r * np.cos(phi), r * np.sin(phi), z])
+
+    rows = np.empty((IN_ROWS, n), np.float32)
+    rows[0], rows[1] = unit(), unit()
+    rows[2:5] = hemisphere()
+    wi = hemisphere()
+    wi[2, ::8] *= -1.0
+    rows[5:8] = wi
+    rows[8], rows[9], rows[10] = unit(), unit(), unit()
+    return rows
+
+
+class Shading:
+    """The scene packed, the program built and its two kernels ready on one device."""
+
+    def __init__(self, device, extra=()):
+        from volcl.device import cl
+        from volcl.pack import pack
+        from volcl.program import build_program
+        from volcl.scene import load
+        self.cl, self.device = cl, device
+        scene = load(SCENE)
+        self.packed = pack(scene)
+        self.index, self.lut = floor_material(self.packed)
+        a = self.packed.arrays
+        self.ctx = cl.Context([device.device])
+        self.queue = cl.CommandQueue(self.ctx)
+        mf = cl.mem_flags
+        self.scene_bufs = [cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(a[k]))
+                           for k in ("bsdfs", "textures", "texels", "bsdf_tables")]
+        opts = (f"-DSHADE_LUT={int(self.lut)}",) + tuple(extra)
+        with FdCapture() as cap:
+            t0 = time.perf_counter()
+            self.program = build_program(self.ctx, self.packed.features, KERNEL, extra=opts)
+            self.build_seconds = time.perf_counter() - t0
+        self.build_output = cap.text
+        self.build_log = self.program.get_build_info(device.device, cl.program_build_info.LOG) or ""
+        self.kernels = {name: cl.Kernel(self.program, f"shade_{name}") for name in KERNELS}
+        self.first_launch = {}
+
+    def upload(self, rows):
+        cl, mf = self.cl, self.cl.mem_flags
+        n = rows.shape[1]
+        m = -(-n // PAD) * PAD
+        if m > n:
+            rows = np.concatenate([rows, np.repeat(rows[:, -1:], m - n, 1)], 1)
+        return {"n": n, "m": m,
+                "in": cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(rows)),
+                "out": {k: cl.Buffer(self.ctx, mf.WRITE_ONLY, 4 * OUT_ROWS * m) for k in KERNELS}}
+
+    def run(self, name, b):
+        q = self.queue
+        q.finish()
+        t0 = time.perf_counter()
+        self.kernels[name](q, (b["m"],), (PAD,), *self.scene_bufs, np.int32(self.index), b["in"], b["out"][name],
+                           np.int32(b["m"]))
+        q.finish()
+        return time.perf_counter() - t0
+
+    def launch_first(self, name, b):
+        """The untimed first launch, its output captured (PoCL prints its remarks then)."""
+        with FdCapture() as cap:
+            self.run(name, b)
+        self.first_launch[name] = cap.text
+
+    def verdict(self, name):
+        """What the runtime says it did with kernel `name`'s work-items."""
+        kernel = f"shade_{name}"
+        text = self.build_log + "\n" + self.build_output
+        if "intel" in self.device.platform_name.lower():
+            lines = "\n".join(ln for ln in text.splitlines() if re.search(rf"\b{kernel}\b", ln))
+            return vector_verdict(self.device.platform_name, lines, "")
+        return vector_verdict(self.device.platform_name, "", self.first_launch.get(name, ""))
+
+    def results(self, name, b):
+        out = np.empty((OUT_ROWS, b["m"]), np.float32)
+        self.cl.enqueue_copy(self.queue, out, b["out"][name])
+        self.queue.finish()
+        return out[:, :b["n"]]
+
+
+def agreement(ref, got):
+    """(share of inputs whose outputs all have identical bits, largest relative difference of any
+    output number, per output row the largest relative difference, per row the largest absolute
+    difference)"""
+    same = np.all(ref.view(np.int32) == got.view(np.int32), axis=0)
+    a, b = ref.astype(np.float64), got.astype(np.float64)
+    scale = np.maximum(np.abs(a), np.abs(b))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rel = np.where(scale > 0, np.abs(a - b) / scale, 0.0)
+    rel = np.where(np.isnan(a) & np.isnan(b), 0.0, np.where(np.isnan(a) | np.isnan(b), np.inf, rel))
+    per_row = rel.max(axis=1)
+    with np.errstate(invalid="ignore"):
+        absolute = np.where(np.isnan(a) & np.isnan(b), 0.0, np.abs(a - b)).max(axis=1)
+    return float(np.mean(same)), float(per_row.max()), per_row, absolute
+
+
+def table(header, rows):
+    out = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    out += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
+    return "\n".join(out)
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--n", type=int, default=1 << 20, help="inputs in the wave")
+    p.add_argument("--repeat", type=int, default=5)
+    p.add_argument("--device", help="volcl device selector")
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--fresh-cache", action="store_true", help="an empty POCL_CACHE_DIR (PoCL prints remarks)")
+    p.add_argument("--remarks-dir", default=None, help="save the build log and first launches' output here")
+    p.add_argument("-D", "--define", action="append", default=[], help="extra -D option for the kernels' build")
+    args = p.parse_args(argv)
+
+    os.environ.setdefault("POCL_VECTORIZER_REMARKS", "1")
+    if args.fresh_cache:
+        os.environ["POCL_CACHE_DIR"] = tempfile.mkdtemp(prefix="pocl-fresh-")
+        os.environ["PYOPENCL_NO_CACHE"] = "1"
+    from volcl import device as devmod
+    with FdCapture():       # the device check's builds print their remarks too
+        device = devmod.choose(args.device)
+    print("# Shading in the lanes: textured_cbox's floor (roughplastic, GGX 0.15, bitmap diffuse)\n")
+    print(f"- CPU: {cpu_model()}, {os.cpu_count()} cores; load average at start "
+          f"{' '.join(Path('/proc/loadavg').read_text().split()[:3])}")
+    print(f"- device: {device.name} ({device.platform_name}, {device.device.max_compute_units} compute units)")
+    log("packing textured_cbox and building ...")
+    sh = Shading(device, tuple(f"-D{d}" for d in args.define))
+    rows = make_inputs(args.n, args.seed)
+    b = sh.upload(rows)
+    print(f"- {b['n']:,} inputs (padded to {b['m']:,}), work-groups of {PAD}; best of {args.repeat} launches, "
+          f"interleaved; texels {'byte-coded' if sh.lut else 'float'}; build {sh.build_seconds:.1f} s\n")
+    for name in KERNELS:
+        t0 = time.perf_counter()
+        sh.launch_first(name, b)
+        log(f"first launch of {name}: {time.perf_counter() - t0:.1f} s")
+    best = dict.fromkeys(KERNELS, np.inf)
+    for _ in range(args.repeat):
+        for name in KERNELS:
+            best[name] = min(best[name], sh.run(name, b))
+    ref = sh.results("renderer", b)
+    got = sh.results("lanes", b)
+    same, worst, per_row, absolute = agreement(ref, got)
+    rate = {k: b["m"] / best[k] / 1e6 for k in KERNELS}
+    print(table(["kernel", "M shadings/s", "vs renderer", "vectorization", "same bits", "max rel diff"], [
+        ["renderer", f"{rate['renderer']:.2f}", "1.00", sh.verdict("renderer"), "–", "–"],
+        ["lanes", f"{rate['lanes']:.2f}", f"{rate['lanes'] / rate['renderer']:.2f}", sh.verdict("lanes"),
+         f"{100 * same:.4f}%", f"{worst:.1e}"]]))
+    print("\nLargest relative difference per output: " + ", ".join(
+        f"{name} {v:.1e}" for name, v in zip(OUTPUTS, per_row)))
+    print("Largest absolute difference per output: " + ", ".join(
+        f"{name} {v:.1e}" for name, v in zip(OUTPUTS, absolute)))
+    differ = np.any(ref.view(np.int32) != got.view(np.int32), axis=0)
+    if differ.any():
+        print(f"Inputs with any differing bits: {100 * np.mean(differ):.2f}%; on the sampled direction "
+              f"{100 * np.mean(np.any(ref[5:8].view(np.int32) != got[5:8].view(np.int32), axis=0)):.2f}%, "
+              f"on eval's value and pdf {100 * np.mean(np.any(ref[:4].view(np.int32) != got[:4].view(np.int32), axis=0)):.2f}%")
+    ok = ref[4] > 0
+    print(f"\nSamples that succeed: renderer {100 * np.mean(ok):.2f}%, lanes {100 * np.mean(got[4] > 0):.2f}%")
+    if args.remarks_dir:
+        out = Path(args.remarks_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        safe = re.sub(r"[^A-Za-z0-9]+", "_", device.platform_name.lower()).strip("_")
+        (out / f"shading-{safe}.txt").write_text(
+            f"--- build log\n{sh.build_log}\n--- build output\n{sh.build_output}\n"
+            + "".join(f"--- first launch of {k}\n{sh.first_launch.get(k, '')}\n" for k in KERNELS))
+    print(f"\nload average at end: {' '.join(Path('/proc/loadavg').read_text().split()[:3])}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
