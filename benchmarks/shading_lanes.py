@@ -3,6 +3,8 @@ renderer's own scalar functions and by a lanes-style rewrite, on a wave of input
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/shading_lanes.py --device 0:0 \\
         [--n 1048576] [--repeat 5] [--fresh-cache] [--remarks-dir DIR] [-D NAME=VALUE ...]
+    OPENBLAS_NUM_THREADS=1 python benchmarks/shading_lanes.py --device 0:0 --round-trip \\
+        [--waves 4096,65536,1048576] [--repeat 5]
 
 The candidate design behind it (README, "Can a wavefront stage run in the SIMD lanes?"): the BVH
 walk stays scalar (benchmarks/traversal_lanes.py found no gain from running it across work-items),
@@ -25,6 +27,21 @@ finish), best of --repeat launches, the two kernels' launches interleaved, after
 each. "agree" compares every output of the lanes kernel with the renderer's: the share of inputs
 whose 12 output numbers all have identical bits, and the largest relative difference of any number
 (then per output, relative and absolute: a direction's small components make relative figures big).
+
+--round-trip times what a shading stage would add around that kernel: in the renderer the inputs
+live in the scalar megakernel's registers. Per wave size, three variants (kernels in shading_lanes.cl),
+each making item i's inputs from a PCG stream of its own (kernels/rng.h, the same distributions as
+above) and folding its 12 outputs into an 8-byte result (their sum in row order, a hash of their bits):
+  inline          one VOLCL_KERNEL kernel: inputs made, shaded by the renderer's functions, folded,
+                  all in registers (the megakernel)
+  split           shade_make (VOLCL_KERNEL: the inputs written to the 11 rows), shade_lanes over the
+                  rows, shade_fold (VOLCL_KERNEL: the 12 output rows read back and folded)
+  split-renderer  split with shade_renderer for shade_lanes: the traffic's and launches' cost alone
+A variant's time: its launches enqueued back to back on the in-order queue, then one finish; best
+(and median) of interleaved runs, --repeat x (2^20 / wave) of them, at least --repeat and at most 400,
+after one untimed run each. The stages are also timed one by one (a finish after each). "agree":
+the share of items whose folded sum (and hash) have the bits of inline's, and the sums' largest
+relative difference (on PoCL, where the lanes outputs have the renderer's bits, all of them expected).
 
 Vectorization is the runtime's own report: Intel's runtime's build log ("Kernel ... was successfully
 vectorized (16)"), PoCL's LLVM remarks at the first launch (POCL_VECTORIZER_REMARKS=1, printed only
@@ -57,6 +74,11 @@ IN_ROWS, OUT_ROWS = 11, 12
 OUTPUTS = ("value.x", "value.y", "value.z", "pdf", "ok", "wi.x", "wi.y", "wi.z", "weight.x", "weight.y",
            "weight.z", "sample pdf")
 KERNELS = ("renderer", "lanes")
+# --round-trip: the variants (timed as a whole: their launches enqueued back to back, one finish)
+# and the stages timed one by one for the breakdown
+TRIPS = {"inline": ("inline",), "split": ("make", "lanes", "fold"), "split-renderer": ("make", "renderer", "fold")}
+STAGES = ("inline", "make", "lanes", "renderer", "fold")
+WAVES = (4096, 65536, 1 << 20)
 
 
 def floor_material(packed):
@@ -134,7 +156,8 @@ class Shading:
             self.build_seconds = time.perf_counter() - t0
         self.build_output = cap.text
         self.build_log = self.program.get_build_info(device.device, cl.program_build_info.LOG) or ""
-        self.kernels = {name: cl.Kernel(self.program, f"shade_{name}") for name in KERNELS}
+        self.kernels = {name: cl.Kernel(self.program, f"shade_{name}")
+                        for name in KERNELS + ("inline", "make", "fold")}
         self.first_launch = {}
 
     def upload(self, rows):
@@ -147,14 +170,58 @@ class Shading:
                 "in": cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(rows)),
                 "out": {k: cl.Buffer(self.ctx, mf.WRITE_ONLY, 4 * OUT_ROWS * m) for k in KERNELS}}
 
+    def enqueue(self, name, b, out=None):
+        """Launch kernel `name` over wave `b` (no finish): one of KERNELS (rows to rows, into
+        b["out"][out or name]) or a round-trip stage (inline, make, fold)."""
+        q, m, k = self.queue, np.int32(b["m"]), self.kernels[name]
+        gs, ls = (b["m"],), (PAD,)
+        if name == "inline":
+            k(q, gs, ls, *self.scene_bufs, np.int32(self.index), np.uint32(b["seed"]), b["result"]["inline"])
+        elif name == "make":
+            k(q, gs, ls, np.uint32(b["seed"]), b["in"], m)
+        elif name == "fold":
+            k(q, gs, ls, b["out"][out], m, b["result"][out])
+        else:
+            k(q, gs, ls, *self.scene_bufs, np.int32(self.index), b["in"], b["out"][out or name], m)
+
     def run(self, name, b):
+        return self.run_all(((name, None),), b)
+
+    def run_all(self, launches, b):
+        """Kernel time of the (name, out) launches enqueued back to back, one finish at the end."""
         q = self.queue
         q.finish()
         t0 = time.perf_counter()
-        self.kernels[name](q, (b["m"],), (PAD,), *self.scene_bufs, np.int32(self.index), b["in"], b["out"][name],
-                           np.int32(b["m"]))
+        for name, out in launches:
+            self.enqueue(name, b, out)
         q.finish()
         return time.perf_counter() - t0
+
+    def trip_wave(self, n, seed):
+        """Buffers for a --round-trip wave of n items: the rows (as upload's) and each variant's
+        8-byte results."""
+        m = -(-n // PAD) * PAD
+        b = self.upload(np.zeros((IN_ROWS, m), np.float32))
+        b.update(n=n, seed=seed, result={k: self.cl.Buffer(self.ctx, self.cl.mem_flags.WRITE_ONLY, 8 * m)
+                                         for k in ("inline",) + KERNELS})
+        return b
+
+    @staticmethod
+    def trip_launches(variant):
+        """A round-trip variant's launches as (name, out) pairs: the split ones' shading kernel
+        writes, and shade_fold reads, b["out"][shading kernel]."""
+        if variant == "inline":
+            return (("inline", None),)
+        shade = "lanes" if variant == "split" else "renderer"
+        return (("make", None), (shade, None), ("fold", shade))
+
+    def trip_result(self, variant, b):
+        """(sum as float32, hash as uint32) per item of a round-trip variant's last run."""
+        key = {"inline": "inline", "split": "lanes", "split-renderer": "renderer"}[variant]
+        out = np.empty((b["m"], 2), np.uint32)
+        self.cl.enqueue_copy(self.queue, out, b["result"][key])
+        self.queue.finish()
+        return out[:b["n"], 0].view(np.float32), out[:b["n"], 1]
 
     def launch_first(self, name, b):
         """The untimed first launch, its output captured (PoCL prints its remarks then)."""
@@ -194,6 +261,67 @@ def agreement(ref, got):
     return float(np.mean(same)), float(per_row.max()), per_row, absolute
 
 
+def fold_agreement(ref, got):
+    """(share of items whose folded sum has the same bits, share whose hash is the same, the sums'
+    largest relative difference): a round-trip variant's results against inline's."""
+    (s0, h0), (s1, h1) = ref, got
+    a, b = s0.astype(np.float64), s1.astype(np.float64)
+    scale = np.maximum(np.abs(a), np.abs(b))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rel = np.where(scale > 0, np.abs(a - b) / scale, 0.0)
+    rel = np.where(np.isnan(a) & np.isnan(b), 0.0, np.where(np.isnan(a) | np.isnan(b), np.inf, rel))
+    return float(np.mean(s0.view(np.uint32) == s1.view(np.uint32))), float(np.mean(h0 == h1)), float(rel.max())
+
+
+def round_trip(sh, waves, repeat, seed):
+    """The --round-trip tables (see the module's text)."""
+    rate_rows, stage_rows, agree_rows = [], [], []
+    for n in waves:
+        b = sh.trip_wave(n, seed)
+        runs = int(max(repeat, min(400, repeat * (1 << 20) // b["m"])))
+        with FdCapture():       # PoCL's remarks at a first launch
+            for v in TRIPS:
+                sh.run_all(sh.trip_launches(v), b)
+        stage_launch = {"inline": (("inline", None),), "make": (("make", None),), "lanes": (("lanes", None),),
+                        "renderer": (("renderer", None),), "fold": (("fold", "lanes"),)}
+        times = {k: [] for k in list(TRIPS) + [f"stage {s}" for s in STAGES]}
+        t0 = time.perf_counter()
+        for _ in range(runs):
+            for v in TRIPS:
+                times[v].append(sh.run_all(sh.trip_launches(v), b))
+            for s in STAGES:
+                times[f"stage {s}"].append(sh.run_all(stage_launch[s], b))
+        log(f"wave {n:,}: {runs} runs in {time.perf_counter() - t0:.1f} s")
+        # the results of a whole variant last (the stages above overwrote split's fold)
+        res = {}
+        for v in TRIPS:
+            sh.run_all(sh.trip_launches(v), b)
+            res[v] = sh.trip_result(v, b)
+        best = {k: min(t) for k, t in times.items()}
+        med = {k: float(np.median(t)) for k, t in times.items()}
+        rate = {v: b["m"] / best[v] / 1e6 for v in TRIPS}
+        rate_med = {v: b["m"] / med[v] / 1e6 for v in TRIPS}
+        rate_rows.append([f"{b['m']:,}", runs] + [f"{rate[v]:.2f} ({rate_med[v]:.2f})" for v in TRIPS]
+                         + [f"{rate['inline'] / rate['split']:.2f} ({rate_med['inline'] / rate_med['split']:.2f})",
+                            f"{rate['split'] / rate['inline']:.2f}", f"{rate['inline'] / rate['split-renderer']:.2f}"])
+        stage_rows.append([f"{b['m']:,}"] + [f"{1e6 * best[f'stage {s}']:.0f}" for s in STAGES]
+                          + [f"{1e6 * best['split']:.0f}", f"{1e6 * best['split-renderer']:.0f}"])
+        for v in ("split", "split-renderer"):
+            same, hashes, worst = fold_agreement(res["inline"], res[v])
+            agree_rows.append([f"{b['m']:,}", v, f"{100 * same:.4f}%", f"{100 * hashes:.4f}%", f"{worst:.1e}"])
+    print(table(["wave", "runs", "inline M/s", "split M/s", "split-renderer M/s", "inline / split",
+                 "split / inline", "inline / split-renderer"], rate_rows))
+    print("\nM shadings/s from the best run (the median run's in brackets); split / inline: the net gain of a "
+          "lanes shading stage, inline / split-renderer: what the traffic and launches alone cost.\n")
+    print(table(["wave", "inline µs"] + [f"{s} µs" for s in STAGES[1:]] + ["split µs", "split-renderer µs"],
+                stage_rows))
+    print("\nBest kernel times, µs: each stage launched alone (a finish after each), then the split variants "
+          "as timed above (their launches back to back).\n")
+    print(table(["wave", "variant", "sums with inline's bits", "hashes with inline's", "max rel diff of sums"],
+                agree_rows))
+    return agree_rows
+
+
 def table(header, rows):
     out = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
     out += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
@@ -209,6 +337,9 @@ def main(argv=None):
     p.add_argument("--fresh-cache", action="store_true", help="an empty POCL_CACHE_DIR (PoCL prints remarks)")
     p.add_argument("--remarks-dir", default=None, help="save the build log and first launches' output here")
     p.add_argument("-D", "--define", action="append", default=[], help="extra -D option for the kernels' build")
+    p.add_argument("--round-trip", action="store_true",
+                   help="time inline shading against a shading stage's round trip (see above)")
+    p.add_argument("--waves", default=",".join(str(w) for w in WAVES), help="--round-trip's wave sizes")
     args = p.parse_args(argv)
 
     os.environ.setdefault("POCL_VECTORIZER_REMARKS", "1")
@@ -224,6 +355,12 @@ def main(argv=None):
     print(f"- device: {device.name} ({device.platform_name}, {device.device.max_compute_units} compute units)")
     log("packing textured_cbox and building ...")
     sh = Shading(device, tuple(f"-D{d}" for d in args.define))
+    if args.round_trip:
+        print(f"- round trip: work-groups of {PAD}; texels {'byte-coded' if sh.lut else 'float'}; "
+              f"build {sh.build_seconds:.1f} s\n")
+        round_trip(sh, [int(w) for w in args.waves.split(",")], args.repeat, args.seed)
+        print(f"\nload average at end: {' '.join(Path('/proc/loadavg').read_text().split()[:3])}")
+        return 0
     rows = make_inputs(args.n, args.seed)
     b = sh.upload(rows)
     print(f"- {b['n']:,} inputs (padded to {b['m']:,}), work-groups of {PAD}; best of {args.repeat} launches, "

@@ -30,22 +30,27 @@
  * SHADE_PERTURB 1 scales D by 1.001 in the lanes kernel only (tests/test_shading_lanes.py). */
 #include "renderer.h"
 
+#define IN_ROWS 11
 #define IN(r) in[(r) * n + i]
 #define OUT(r) out[(r) * n + i]
 
-VOLCL_KERNEL void shade_renderer(__global const Bsdf *bsdfs, __global const Texture *textures,
-                                 __global const float *texels, __global const float *bsdf_tables, int index,
-                                 __global const float *in, __global float *out, int n) {
-    int i = get_global_id(0);
+/* The renderer's shading of one input (the rows' u, v, wo, wi, u1, u2) into the 12 outputs, for
+ * shade_renderer and shade_inline alike. Inlined always: shade_renderer's rates are then the ones
+ * it had with this body in the kernel (PoCL 9.4-9.8, Intel 12.1-12.3 M/s against 9.6-9.8 and
+ * 12.3); left to the compilers, Intel's runtime lost 5% (scalar arguments) to 20% (arrays). */
+typedef struct {
+    float3 f, wi, weight;
+    float pdf, ok, spdf;
+} ShadeOut;
+
+__attribute__((always_inline)) inline ShadeOut shade_floor(__global const Bsdf *bsdfs, __global const Texture *textures,
+                            __global const float *texels, __global const float *bsdf_tables, int index,
+                            float2 uv, float3 wo, float3 wi, float u1, float2 u2) {
     SceneData sc;
     sc.bsdfs = bsdfs;
     sc.textures = textures;
     sc.texels = texels;
     sc.bsdf_tables = bsdf_tables;
-    float2 uv = (float2)(IN(0), IN(1));
-    float3 wo = (float3)(IN(2), IN(3), IN(4)), wi = (float3)(IN(5), IN(6), IN(7));
-    float u1 = IN(8);
-    float2 u2 = (float2)(IN(9), IN(10));
     /* bsdf_vertex_at's parameters (bsdf_vertex.h), in its order */
     BsdfVertex v;
     __global const Bsdf *b = &sc.bsdfs[index];
@@ -74,18 +79,113 @@ VOLCL_KERNEL void shade_renderer(__global const Bsdf *bsdfs, __global const Text
     s.pdf = 0.0f;
     s.delta = false;
     bool ok = bsdf_sample_local(&v, wo, u1, u2, &s);
-    OUT(0) = f.x;
-    OUT(1) = f.y;
-    OUT(2) = f.z;
-    OUT(3) = pdf;
-    OUT(4) = ok ? 1.0f : 0.0f;
-    OUT(5) = ok ? s.wi.x : 0.0f;
-    OUT(6) = ok ? s.wi.y : 0.0f;
-    OUT(7) = ok ? s.wi.z : 0.0f;
-    OUT(8) = ok ? s.weight.x : 0.0f;
-    OUT(9) = ok ? s.weight.y : 0.0f;
-    OUT(10) = ok ? s.weight.z : 0.0f;
-    OUT(11) = ok ? s.pdf : 0.0f;
+    ShadeOut o;
+    o.f = f;
+    o.pdf = pdf;
+    o.ok = ok ? 1.0f : 0.0f;
+    o.wi = ok ? s.wi : (float3)(0.0f);
+    o.weight = ok ? s.weight : (float3)(0.0f);
+    o.spdf = ok ? s.pdf : 0.0f;
+    return o;
+}
+
+VOLCL_KERNEL void shade_renderer(__global const Bsdf *bsdfs, __global const Texture *textures,
+                                 __global const float *texels, __global const float *bsdf_tables, int index,
+                                 __global const float *in, __global float *out, int n) {
+    int i = get_global_id(0);
+    ShadeOut o = shade_floor(bsdfs, textures, texels, bsdf_tables, index, (float2)(IN(0), IN(1)),
+                             (float3)(IN(2), IN(3), IN(4)), (float3)(IN(5), IN(6), IN(7)), IN(8),
+                             (float2)(IN(9), IN(10)));
+    OUT(0) = o.f.x;
+    OUT(1) = o.f.y;
+    OUT(2) = o.f.z;
+    OUT(3) = o.pdf;
+    OUT(4) = o.ok;
+    OUT(5) = o.wi.x;
+    OUT(6) = o.wi.y;
+    OUT(7) = o.wi.z;
+    OUT(8) = o.weight.x;
+    OUT(9) = o.weight.y;
+    OUT(10) = o.weight.z;
+    OUT(11) = o.spdf;
+}
+
+/* ---- the round trip (benchmarks/shading_lanes.py --round-trip): what handing the shading to a
+ * stage of its own adds to a scalar megakernel that holds the inputs in registers.
+ *
+ * trip_input makes item i's inputs from a PCG stream of its own (rng.h's rng_next_uint), in
+ * the rows' order and distributions (make_inputs: uv and u in [0, 1), wo and wi uniform on the
+ * upper hemisphere, every eighth wi mirrored below it); trip_fold folds the 12 outputs into the
+ * item's result: their sum in row order and a hash of their bits (any differing bit shows).
+ *   shade_inline  inputs made, shaded by the renderer's functions and folded in registers (the
+ *                 megakernel: no traffic)
+ *   shade_make    inputs made and written to the rows (the scalar stage handing them over)
+ *   shade_fold    the 12 output rows read back and folded (the scalar stage taking them back)
+ * split: shade_make, shade_lanes (or shade_renderer), shade_fold. */
+inline void trip_input(uint seed, int i, float *x) {
+    /* a PCG stream per item, seeded without rng_init's four splitmix rounds (the renderer seeds once
+     * per sample, not per bounce) */
+    Rng r;
+    r.state = ((ulong)seed << 32) ^ ((ulong)(uint)i * 0x9e3779b97f4a7c15UL);
+    r.inc = ((ulong)seed << 1) | 1u;
+    rng_next_uint(&r);
+    x[0] = rng_next_float(&r);
+    x[1] = rng_next_float(&r);
+    for (int k = 0; k < 2; k++) {
+        float z = rng_next_float(&r);
+        float phi = 2.0f * VOLCL_PI * rng_next_float(&r);
+        float rr = sqrt(fmax(0.0f, 1.0f - z * z)), c, s = sincos(phi, &c);
+        x[2 + 3 * k] = rr * c;
+        x[3 + 3 * k] = rr * s;
+        x[4 + 3 * k] = (k == 1 && (i & 7) == 0) ? -z : z;
+    }
+    x[8] = rng_next_float(&r);
+    x[9] = rng_next_float(&r);
+    x[10] = rng_next_float(&r);
+}
+
+#define TRIP_FOLD(y) \
+    sum += (y);      \
+    h = rotate(h ^ as_uint(y), 5u) * 0x01000193u;
+
+inline void trip_fold(ShadeOut o, int i, __global uint *result) {
+    float sum = 0.0f;
+    uint h = 0x9e3779b9u;
+    TRIP_FOLD(o.f.x) TRIP_FOLD(o.f.y) TRIP_FOLD(o.f.z) TRIP_FOLD(o.pdf) TRIP_FOLD(o.ok)
+    TRIP_FOLD(o.wi.x) TRIP_FOLD(o.wi.y) TRIP_FOLD(o.wi.z)
+    TRIP_FOLD(o.weight.x) TRIP_FOLD(o.weight.y) TRIP_FOLD(o.weight.z) TRIP_FOLD(o.spdf)
+    vstore2((uint2)(as_uint(sum), h), i, result);
+}
+
+VOLCL_KERNEL void shade_inline(__global const Bsdf *bsdfs, __global const Texture *textures,
+                               __global const float *texels, __global const float *bsdf_tables, int index,
+                               uint seed, __global uint *result) {
+    int i = get_global_id(0);
+    float x[IN_ROWS];
+    trip_input(seed, i, x);
+    trip_fold(shade_floor(bsdfs, textures, texels, bsdf_tables, index, (float2)(x[0], x[1]),
+                          (float3)(x[2], x[3], x[4]), (float3)(x[5], x[6], x[7]), x[8], (float2)(x[9], x[10])),
+              i, result);
+}
+
+VOLCL_KERNEL void shade_make(uint seed, __global float *in, int n) {
+    int i = get_global_id(0);
+    float x[IN_ROWS];
+    trip_input(seed, i, x);
+    for (int r = 0; r < IN_ROWS; r++)
+        IN(r) = x[r];
+}
+
+VOLCL_KERNEL void shade_fold(__global const float *out, int n, __global uint *result) {
+    int i = get_global_id(0);
+    ShadeOut o;
+    o.f = (float3)(OUT(0), OUT(1), OUT(2));
+    o.pdf = OUT(3);
+    o.ok = OUT(4);
+    o.wi = (float3)(OUT(5), OUT(6), OUT(7));
+    o.weight = (float3)(OUT(8), OUT(9), OUT(10));
+    o.spdf = OUT(11);
+    trip_fold(o, i, result);
 }
 
 /* ---- the lanes version: every function below inlined (as the lanes stages build them) */
