@@ -5,6 +5,8 @@ renderer's own scalar functions and by a lanes-style rewrite, on a wave of input
         [--n 1048576] [--repeat 5] [--fresh-cache] [--remarks-dir DIR] [-D NAME=VALUE ...]
     OPENBLAS_NUM_THREADS=1 python benchmarks/shading_lanes.py --device 0:0 --round-trip \\
         [--waves 4096,65536,1048576] [--repeat 5]
+    OPENBLAS_NUM_THREADS=1 python benchmarks/shading_lanes.py --device 0:0 --gather \\
+        [--waves 4096,65536] [--repeat 5]
 
 The candidate design behind it (README, "Can a wavefront stage run in the SIMD lanes?"): the BVH
 walk stays scalar (benchmarks/traversal_lanes.py found no gain from running it across work-items),
@@ -43,6 +45,31 @@ after one untimed run each. The stages are also timed one by one (a finish after
 the share of items whose folded sum (and hash) have the bits of inline's, and the sums' largest
 relative difference (on PoCL, where the lanes outputs have the renderer's bits, all of them expected).
 
+--gather times a shading stage fed from a mixed wave: a share f (1/4, 1/2, 1) of the items are
+floor hits, chosen by a hash of (seed, item) alone (gather_floor; floor_items is its host copy), the
+others "other" hits that get a fixed few flops of diffuse-like work (gather_other) in every variant.
+Inputs made and results folded as --round-trip's. Variants (kernels in shading_lanes.cl):
+  inline           shade_ginline (VOLCL_KERNEL): floor items shaded inline by the renderer's
+                   functions, the others by gather_other, in one scalar kernel (the megakernel's
+                   way, divergence included)
+  gather           counter zeroed, shade_gmake (VOLCL_KERNEL: a floor item takes row
+                   atomic_inc(count) for its inputs and its own index, an other item is shaded and
+                   folded at once), the count read back (a blocking 4-byte read), shade_lanes over
+                   the first count rows rounded up to the work-group, shade_gfold (row k folded into
+                   item owner[k]'s result) over as many
+  gather-full      gather without the read back: shade_lanes and shade_gfold over the whole wave
+                   (the rows past the count shaded from stale inputs, not folded)
+  gather-count     gather-full with shade_glanes: whole work-groups past the count (read on the
+                   device) skip the shading
+  gather-wg        gather with shade_gmake_wg: the counting aggregated per work-group (a local
+                   atomic_inc, one global atomic_add a group: each group's rows one block)
+  gather-renderer  gather with shade_renderer for shade_lanes
+Time per run: from the first enqueue to one finish (the read back included), best (and median) of
+interleaved runs, as many as --round-trip's; all-floor is --round-trip's inline on the same wave
+for reference. "agree": per item (never sums over the wave: the atomic counter's order varies from
+run to run, and a row's result reaches its item through owner), the share of items whose folded
+sum (and hash) have inline's bits, after each variant ran into results filled with a sentinel.
+
 Vectorization is the runtime's own report: Intel's runtime's build log ("Kernel ... was successfully
 vectorized (16)"), PoCL's LLVM remarks at the first launch (POCL_VECTORIZER_REMARKS=1, printed only
 when the work-group function is compiled: --fresh-cache gives PoCL an empty cache and turns
@@ -79,6 +106,12 @@ KERNELS = ("renderer", "lanes")
 TRIPS = {"inline": ("inline",), "split": ("make", "lanes", "fold"), "split-renderer": ("make", "renderer", "fold")}
 STAGES = ("inline", "make", "lanes", "renderer", "fold")
 WAVES = (4096, 65536, 1 << 20)
+# --gather: the variants; each one's results live in b["result"][RESULT[variant]]
+GATHERS = ("inline", "gather", "gather-full", "gather-count", "gather-wg", "gather-renderer")
+RESULT = {"inline": "inline", "split": "lanes", "split-renderer": "renderer", "gather": "lanes",
+          "gather-full": "lanes", "gather-count": "lanes", "gather-wg": "lanes", "gather-renderer": "renderer"}
+GATHER_WAVES = (4096, 65536)
+GATHER_QUARTERS = (1, 2, 4)
 
 
 def floor_material(packed):
@@ -157,7 +190,7 @@ class Shading:
         self.build_output = cap.text
         self.build_log = self.program.get_build_info(device.device, cl.program_build_info.LOG) or ""
         self.kernels = {name: cl.Kernel(self.program, f"shade_{name}")
-                        for name in KERNELS + ("inline", "make", "fold")}
+                        for name in KERNELS + ("inline", "make", "fold", "ginline", "gmake", "gfold", "glanes", "gmake_wg")}
         self.first_launch = {}
 
     def upload(self, rows):
@@ -170,12 +203,23 @@ class Shading:
                 "in": cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(rows)),
                 "out": {k: cl.Buffer(self.ctx, mf.WRITE_ONLY, 4 * OUT_ROWS * m) for k in KERNELS}}
 
-    def enqueue(self, name, b, out=None):
-        """Launch kernel `name` over wave `b` (no finish): one of KERNELS (rows to rows, into
-        b["out"][out or name]) or a round-trip stage (inline, make, fold)."""
+    def enqueue(self, name, b, out=None, size=None):
+        """Launch kernel `name` over wave `b` (no finish), over `size` work-items (a multiple of PAD)
+        or the whole wave: one of KERNELS (rows to rows, into b["out"][out or name]), a round-trip
+        stage (inline, make, fold) or a gather stage (ginline, gmake, gfold; their results
+        b["result"][out])."""
         q, m, k = self.queue, np.int32(b["m"]), self.kernels[name]
-        gs, ls = (b["m"],), (PAD,)
-        if name == "inline":
+        gs, ls = (size or b["m"],), (PAD,)
+        if name == "ginline":
+            k(q, gs, ls, *self.scene_bufs, np.int32(self.index), np.uint32(b["seed"]), np.int32(b["fq"]),
+              b["result"]["inline"])
+        elif name in ("gmake", "gmake_wg"):
+            k(q, gs, ls, np.uint32(b["seed"]), np.int32(b["fq"]), b["in"], m, b["count"], b["owner"], b["result"][out])
+        elif name == "glanes":
+            k(q, gs, ls, *self.scene_bufs, np.int32(self.index), b["in"], b["out"]["lanes"], m, b["count"])
+        elif name == "gfold":
+            k(q, gs, ls, b["out"][out], m, b["count"], b["owner"], b["result"][out])
+        elif name == "inline":
             k(q, gs, ls, *self.scene_bufs, np.int32(self.index), np.uint32(b["seed"]), b["result"]["inline"])
         elif name == "make":
             k(q, gs, ls, np.uint32(b["seed"]), b["in"], m)
@@ -217,11 +261,48 @@ class Shading:
 
     def trip_result(self, variant, b):
         """(sum as float32, hash as uint32) per item of a round-trip variant's last run."""
-        key = {"inline": "inline", "split": "lanes", "split-renderer": "renderer"}[variant]
+        key = RESULT[variant]
         out = np.empty((b["m"], 2), np.uint32)
         self.cl.enqueue_copy(self.queue, out, b["result"][key])
         self.queue.finish()
         return out[:b["n"], 0].view(np.float32), out[:b["n"], 1]
+
+    def gather_wave(self, n, seed, fq):
+        """Buffers for a --gather wave of n items, fq / 4 of them floor hits: trip_wave's, the row
+        counter and the rows' owners."""
+        b = self.trip_wave(n, seed)
+        mf = self.cl.mem_flags
+        b.update(fq=fq, count=self.cl.Buffer(self.ctx, mf.READ_WRITE, 4),
+                 owner=self.cl.Buffer(self.ctx, mf.READ_WRITE, 4 * b["m"]), count_host=np.zeros(1, np.int32))
+        return b
+
+    def run_gather(self, variant, b):
+        """Time of one run of a --gather variant (see the module's text), from the first enqueue to
+        the finish; the floor rows' count is left in b["count_host"] (where read)."""
+        q = self.queue
+        q.finish()
+        t0 = time.perf_counter()
+        if variant == "inline":
+            self.enqueue("ginline", b)
+        else:
+            shade = RESULT[variant]
+            self.cl.enqueue_fill_buffer(q, b["count"], np.int32(0), 0, 4)
+            self.enqueue("gmake_wg" if variant == "gather-wg" else "gmake", b, shade)
+            if variant == "gather-count":       # the lanes kernel reads the count itself
+                self.enqueue("glanes", b)
+                self.enqueue("gfold", b, shade)
+                q.finish()
+                return time.perf_counter() - t0
+            if variant == "gather-full":
+                size = b["m"]
+            else:
+                self.cl.enqueue_copy(q, b["count_host"], b["count"])     # blocking: make has run
+                size = -(-int(b["count_host"][0]) // PAD) * PAD
+            if size:
+                self.enqueue(shade, b, size=size)
+                self.enqueue("gfold", b, shade, size=size)
+        q.finish()
+        return time.perf_counter() - t0
 
     def launch_first(self, name, b):
         """The untimed first launch, its output captured (PoCL prints its remarks then)."""
@@ -322,6 +403,68 @@ def round_trip(sh, waves, repeat, seed):
     return agree_rows
 
 
+def floor_items(n, seed, fq):
+    """gather_floor (shading_lanes.cl) on the host: which of n items are floor hits."""
+    with np.errstate(over="ignore"):
+        h = (np.arange(n, dtype=np.uint32) * np.uint32(0x9e3779b9)) ^ (np.uint32(seed) * np.uint32(0x85ebca6b))
+        h ^= h >> np.uint32(16)
+        h *= np.uint32(0x7feb352d)
+        h ^= h >> np.uint32(15)
+        h *= np.uint32(0x846ca68b)
+        h ^= h >> np.uint32(16)
+    return (h & np.uint32(3)).astype(np.int32) < fq
+
+
+def gather_check(sh, b):
+    """Each --gather variant run once into results filled with a sentinel: (per variant its (sum,
+    hash) per item, the floor rows counted by the last gather run)."""
+    res = {}
+    for v in GATHERS:
+        sh.cl.enqueue_fill_buffer(sh.queue, b["result"][RESULT[v]], np.uint32(0xFFFFFFFF), 0, 8 * b["m"])
+        sh.run_gather(v, b)
+        res[v] = sh.trip_result(v, b)
+    return res, int(b["count_host"][0])
+
+
+def gather(sh, waves, quarters, repeat, seed):
+    """The --gather tables (see the module's text)."""
+    rate_rows, agree_rows = [], []
+    for n in waves:
+        for fq in quarters:
+            b = sh.gather_wave(n, seed, fq)
+            runs = int(max(repeat, min(400, repeat * (1 << 20) // b["m"])))
+            with FdCapture():       # PoCL's remarks at a first launch
+                res, count = gather_check(sh, b)
+            floor = floor_items(b["n"], seed, fq)
+            assert count == int(floor.sum()), (count, int(floor.sum()))
+            times = {v: [] for v in GATHERS + ("all-floor",)}
+            t0 = time.perf_counter()
+            for _ in range(runs):
+                for v in GATHERS:
+                    times[v].append(sh.run_gather(v, b))
+                times["all-floor"].append(sh.run("inline", b))      # --round-trip's inline: f = 1, no hash
+            log(f"wave {n:,}, f {fq}/4: {runs} runs in {time.perf_counter() - t0:.1f} s")
+            best = {v: min(t) for v, t in times.items()}
+            med = {v: float(np.median(t)) for v, t in times.items()}
+            rate = {v: b["n"] / best[v] / 1e6 for v in times}
+            rate_med = {v: b["n"] / med[v] / 1e6 for v in times}
+            rate_rows.append([f"{b['n']:,}", f"{fq}/4", f"{100 * floor.mean():.1f}%", runs]
+                             + [f"{rate[v]:.2f} ({rate_med[v]:.2f})" for v in GATHERS + ("all-floor",)]
+                             + [f"{rate[v] / rate['inline']:.2f} ({rate_med[v] / rate_med['inline']:.2f})"
+                                for v in ("gather", "gather-full", "gather-count", "gather-wg")])
+            for v in GATHERS[1:]:
+                same, hashes, worst = fold_agreement(res["inline"], res[v])
+                agree_rows.append([f"{b['n']:,}", f"{fq}/4", v, f"{100 * same:.4f}%", f"{100 * hashes:.4f}%",
+                                   f"{worst:.1e}"])
+    print(table(["wave", "f", "floor items", "runs"] + [f"{v} M/s" for v in GATHERS + ("all-floor",)]
+                + [f"{v} / inline" for v in ("gather", "gather-full", "gather-count", "gather-wg")], rate_rows))
+    print("\nM items/s (floor and other hits) from the best run (the median run's in brackets); all-floor: "
+          "--round-trip's inline on the same wave (every item a floor hit, no hash), for reference.\n")
+    print(table(["wave", "f", "variant", "items' sums with inline's bits", "hashes with inline's",
+                 "max rel diff of sums"], agree_rows))
+    return agree_rows
+
+
 def table(header, rows):
     out = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
     out += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
@@ -339,7 +482,10 @@ def main(argv=None):
     p.add_argument("-D", "--define", action="append", default=[], help="extra -D option for the kernels' build")
     p.add_argument("--round-trip", action="store_true",
                    help="time inline shading against a shading stage's round trip (see above)")
-    p.add_argument("--waves", default=",".join(str(w) for w in WAVES), help="--round-trip's wave sizes")
+    p.add_argument("--waves", default=None, help="--round-trip's (--gather's) wave sizes, "
+                   f"default {','.join(str(w) for w in WAVES)} ({','.join(str(w) for w in GATHER_WAVES)})")
+    p.add_argument("--gather", action="store_true",
+                   help="time inline shading of a mixed wave against gathering its floor hits (see above)")
     args = p.parse_args(argv)
 
     os.environ.setdefault("POCL_VECTORIZER_REMARKS", "1")
@@ -358,7 +504,15 @@ def main(argv=None):
     if args.round_trip:
         print(f"- round trip: work-groups of {PAD}; texels {'byte-coded' if sh.lut else 'float'}; "
               f"build {sh.build_seconds:.1f} s\n")
-        round_trip(sh, [int(w) for w in args.waves.split(",")], args.repeat, args.seed)
+        round_trip(sh, [int(w) for w in (args.waves or ",".join(map(str, WAVES))).split(",")], args.repeat,
+                   args.seed)
+        print(f"\nload average at end: {' '.join(Path('/proc/loadavg').read_text().split()[:3])}")
+        return 0
+    if args.gather:
+        print(f"- gather: work-groups of {PAD}; texels {'byte-coded' if sh.lut else 'float'}; "
+              f"build {sh.build_seconds:.1f} s\n")
+        gather(sh, [int(w) for w in (args.waves or ",".join(map(str, GATHER_WAVES))).split(",")], GATHER_QUARTERS,
+               args.repeat, args.seed)
         print(f"\nload average at end: {' '.join(Path('/proc/loadavg').read_text().split()[:3])}")
         return 0
     rows = make_inputs(args.n, args.seed)

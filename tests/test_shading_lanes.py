@@ -72,3 +72,29 @@ def test_round_trip_folds_give_inlines_results(device):
         # Intel's vector code rounds otherwise (test above): the sums within 2e-4 relative
         # (measured 3e-6 here, 2e-5 on 65,536 items; D scaled by 1.001 gives 1e-3)
         assert worst < 2e-4
+
+
+def test_gather_folds_give_inlines_results_per_item(device):
+    """--gather's variants (a mixed wave's floor hits compacted into rows by an atomic counter,
+    shaded over the rows, folded back into their owners) give each item inline's result (floor hits
+    shaded in the mixed scalar kernel, the others' cheap work alike): per item, whatever order the
+    counter handed the rows out in; bit for bit through the renderer's functions everywhere and
+    through the lanes kernel on PoCL."""
+    if device.kind != "cpu":
+        pytest.skip("a study of the CPU runtimes' vectorizers")
+    sh = shading_lanes.Shading(device)
+    b = sh.gather_wave(N, seed=7, fq=2)
+    res, count = shading_lanes.gather_check(sh, b)
+    floor = shading_lanes.floor_items(N, 7, 2)
+    assert count == floor.sum() and 0.4 < floor.mean() < 0.6
+    sums = res["inline"][0]
+    assert np.all(np.isfinite(sums)) and np.unique(sums[floor]).size > floor.sum() // 2
+    assert not np.any(res["inline"][1] == 0xFFFFFFFF)      # every item written (the sentinel gone)
+    for v in shading_lanes.GATHERS[1:]:
+        same, hashes, worst = shading_lanes.fold_agreement(res["inline"], res[v])
+        if v == "gather-renderer" or "portable computing language" in device.platform_name.lower():
+            assert (same, hashes) == (1.0, 1.0), v
+        else:
+            assert worst < 2e-4, v       # Intel's vector code rounds otherwise (as for the round trip)
+        # the others' results never pass through the rows
+        assert np.array_equal(res["inline"][1][~floor], res[v][1][~floor])

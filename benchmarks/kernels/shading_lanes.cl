@@ -176,8 +176,8 @@ VOLCL_KERNEL void shade_make(uint seed, __global float *in, int n) {
         IN(r) = x[r];
 }
 
-VOLCL_KERNEL void shade_fold(__global const float *out, int n, __global uint *result) {
-    int i = get_global_id(0);
+/* the 12 output rows' column i */
+inline ShadeOut trip_read(__global const float *out, int n, int i) {
     ShadeOut o;
     o.f = (float3)(OUT(0), OUT(1), OUT(2));
     o.pdf = OUT(3);
@@ -185,7 +185,111 @@ VOLCL_KERNEL void shade_fold(__global const float *out, int n, __global uint *re
     o.wi = (float3)(OUT(5), OUT(6), OUT(7));
     o.weight = (float3)(OUT(8), OUT(9), OUT(10));
     o.spdf = OUT(11);
+    return o;
+}
+
+VOLCL_KERNEL void shade_fold(__global const float *out, int n, __global uint *result) {
+    int i = get_global_id(0);
+    trip_fold(trip_read(out, n, i), i, result);
+}
+
+/* ---- the gather (benchmarks/shading_lanes.py --gather): a wave of mixed hits. gather_floor says
+ * by a hash of (seed, i) alone whether item i is a floor hit (a share fq / 4 of them); the others
+ * get gather_other, a fixed diffuse-like few flops, in every variant. Per-item results never
+ * depend on the order in which atomic_inc hands out rows: each row carries its item's inputs and
+ * index, and the fold writes item owner[k]'s result.
+ *   shade_ginline  inputs made, floor items shaded by the renderer's functions, others by
+ *                  gather_other, folded (the megakernel, divergence included)
+ *   shade_gmake    inputs made; floor items' inputs written to row atomic_inc(count) with their
+ *                  index in owner; others shaded and folded at once
+ *   shade_gfold    rows k < count read back and folded into item owner[k]'s result
+ * gather: shade_gmake, shade_lanes (or shade_renderer) over the first rows, shade_gfold. */
+inline bool gather_floor(uint seed, int i, int fq) {
+    uint h = ((uint)i * 0x9e3779b9u) ^ (seed * 0x85ebca6bu);
+    h ^= h >> 16;
+    h *= 0x7feb352du;
+    h ^= h >> 15;
+    h *= 0x846ca68bu;
+    h ^= h >> 16;
+    return (int)(h & 3u) < fq;
+}
+
+inline ShadeOut gather_other(const float *x) {
+    ShadeOut o;
+    float c = 0.5f + 0.25f * x[0], cos_i = fmax(x[7], 0.0f);
+    float3 albedo = (float3)(c, 0.8f * c, 0.6f * c);
+    o.f = albedo * (cos_i * VOLCL_INV_PI);
+    o.pdf = cos_i * VOLCL_INV_PI;
+    o.ok = 1.0f;
+    o.wi = (float3)(-x[2], -x[3], x[4]);
+    o.weight = albedo;
+    o.spdf = x[4] * VOLCL_INV_PI;
+    return o;
+}
+
+VOLCL_KERNEL void shade_ginline(__global const Bsdf *bsdfs, __global const Texture *textures,
+                                __global const float *texels, __global const float *bsdf_tables, int index,
+                                uint seed, int fq, __global uint *result) {
+    int i = get_global_id(0);
+    float x[IN_ROWS];
+    trip_input(seed, i, x);
+    ShadeOut o;
+    if (gather_floor(seed, i, fq))
+        o = shade_floor(bsdfs, textures, texels, bsdf_tables, index, (float2)(x[0], x[1]),
+                        (float3)(x[2], x[3], x[4]), (float3)(x[5], x[6], x[7]), x[8], (float2)(x[9], x[10]));
+    else
+        o = gather_other(x);
     trip_fold(o, i, result);
+}
+
+VOLCL_KERNEL void shade_gmake(uint seed, int fq, __global float *in, int n, volatile __global int *count,
+                              __global int *owner, __global uint *result) {
+    int i = get_global_id(0);
+    float x[IN_ROWS];
+    trip_input(seed, i, x);
+    if (gather_floor(seed, i, fq)) {
+        int k = atomic_inc(count);
+        for (int r = 0; r < IN_ROWS; r++)
+            in[r * n + k] = x[r];
+        owner[k] = i;
+    } else {
+        trip_fold(gather_other(x), i, result);
+    }
+}
+
+/* shade_gmake with the counting aggregated per work-group: a local atomic_inc numbers the group's
+ * floor items, one global atomic_add reserves the group's block of rows (one atomic per group, and
+ * each group's rows contiguous instead of interleaved with the other cores' items) */
+VOLCL_KERNEL void shade_gmake_wg(uint seed, int fq, __global float *in, int n, volatile __global int *count,
+                                 __global int *owner, __global uint *result) {
+    __local int lcount, lbase;
+    int i = get_global_id(0);
+    if (get_local_id(0) == 0)
+        lcount = 0;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    float x[IN_ROWS];
+    trip_input(seed, i, x);
+    bool floor_hit = gather_floor(seed, i, fq);
+    int j = floor_hit ? atomic_inc((volatile __local int *)&lcount) : 0;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    if (get_local_id(0) == 0)
+        lbase = atomic_add(count, lcount);
+    barrier(CLK_LOCAL_MEM_FENCE);
+    if (floor_hit) {
+        int k = lbase + j;
+        for (int r = 0; r < IN_ROWS; r++)
+            in[r * n + k] = x[r];
+        owner[k] = i;
+    } else {
+        trip_fold(gather_other(x), i, result);
+    }
+}
+
+VOLCL_KERNEL void shade_gfold(__global const float *out, int n, __global const int *count,
+                              __global const int *owner, __global uint *result) {
+    int i = get_global_id(0);    /* the row */
+    if (i < *count)
+        trip_fold(trip_read(out, n, i), owner[i], result);
 }
 
 /* ---- the lanes version: every function below inlined (as the lanes stages build them) */
@@ -396,10 +500,10 @@ inline V3 sh_ggx_sample(float au, float av, V3 wi, float u0, float u1) {
     return sh_normalize(v3(-sx, -sy, 1.0f));
 }
 
-__kernel void shade_lanes(__global const Bsdf *bsdfs, __global const Texture *textures,
-                          __global const float *texels, __global const float *bsdf_tables, int index,
-                          __global const float *in, __global float *out, int n) {
-    int i = get_global_id(0);
+/* shade_lanes' work-item i (shade_glanes's too) */
+inline void sh_shade(__global const Bsdf *bsdfs, __global const Texture *textures, __global const float *texels,
+                     __global const float *bsdf_tables, int index, __global const float *in, __global float *out,
+                     int n, int i) {
     __global const Bsdf *b = &bsdfs[index];
     ShadeBsdf pb;
     pb.sw = b->spec_weight;
@@ -454,6 +558,25 @@ __kernel void shade_lanes(__global const Bsdf *bsdfs, __global const Texture *te
     OUT(9) = ok ? sv.y / spdf : 0.0f;
     OUT(10) = ok ? sv.z / spdf : 0.0f;
     OUT(11) = ok ? spdf : 0.0f;
+}
+
+__kernel void shade_lanes(__global const Bsdf *bsdfs, __global const Texture *textures,
+                          __global const float *texels, __global const float *bsdf_tables, int index,
+                          __global const float *in, __global float *out, int n) {
+    sh_shade(bsdfs, textures, texels, bsdf_tables, index, in, out, n, get_global_id(0));
+}
+
+/* --gather's gather-count: launched over the whole wave, the count read on the device (no read
+ * back to the host) */
+__kernel void shade_glanes(__global const Bsdf *bsdfs, __global const Texture *textures,
+                           __global const float *texels, __global const float *bsdf_tables, int index,
+                           __global const float *in, __global float *out, int n,
+                           __global const int *restrict count) {
+    /* whole work-groups past the count skip (a condition the same for all their work-items, which
+     * PoCL's loop vectorizer takes; a per-item i < count stopped it); the last group's items past
+     * the count shade stale rows, their outputs unread */
+    if ((int)(get_group_id(0) * get_local_size(0)) < *count)
+        sh_shade(bsdfs, textures, texels, bsdf_tables, index, in, out, n, get_global_id(0));
 }
 
 #pragma clang attribute pop
