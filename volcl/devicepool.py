@@ -93,7 +93,7 @@ class DevicePool:
                 # Wavefront made here (a table of a few KB) is dropped, each renderer makes its own
                 _, sources = wavefront.start(render.ENGINE, render.features, render.packed, render.params, w.device)
                 if w.device.builds > builds:
-                    seconds = sum(w.device.programs.seconds(render.features, f, extra) for f, extra in sources)
+                    seconds = w.device.programs.seconds_of(render.features, sources)
                     with self._cond:    # the devices' threads add to one total
                         render.build_seconds += seconds
                 render.prepared.upload(w.device)

@@ -115,6 +115,10 @@ class ProgramCache:
         """How long building this program took (0 if it was never built here)."""
         return self._seconds.get(program_key(features, source_file, extra), 0.0)
 
+    def seconds_of(self, features: dict[str, bool], sources) -> float:
+        """How long building these programs took: `sources` are (source file, extra options) pairs."""
+        return sum(self.seconds(features, f, extra) for f, extra in sources)
+
 
 def _build_log_path() -> Path:
     return Path(os.environ.get("POCL_CACHE_DIR", ".")).parent / "builds.json"

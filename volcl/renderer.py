@@ -137,7 +137,7 @@ class Renderer:
         logged as cold or warm (volcl.program)."""
         self.built = self.device.builds > builds
         if self.built:
-            self.build_seconds = sum(self.device.programs.seconds(self.features, f, extra) for f, extra in sources)
+            self.build_seconds = self.device.programs.seconds_of(self.features, sources)
             self.cold_build_seconds, self.build_was_cold = note_build(
                 self.device.name, self.features, self.build_seconds, "" if self.wavefront is None else "wavefront")
         else:
