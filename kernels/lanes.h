@@ -98,6 +98,19 @@ inline bool lanes_roulette(Rng32 *rng, V3 *beta, bool going, int depth, int rr_d
     return killed;
 }
 
+/* sample_concentric_disk (sampling.h): its two cases as selects */
+inline void lanes_concentric_disk(float u0, float u1, float *dx, float *dy) {
+    float ox = 2.0f * u0 - 1.0f, oy = 2.0f * u1 - 1.0f;
+    /* |o| two ways: two fabs side by side were packed into a <2 x float> */
+    bool wide = fabs(ox) > (oy < 0.0f ? -oy : oy);
+    float r = wide ? ox : oy;
+    float a = (VOLCL_PI / 4.0f) * ((wide ? oy : ox) / r);
+    float c = cos_small(a), s = sin_small(a);
+    bool centre = (ox == 0.0f) & (oy == 0.0f);
+    *dx = centre ? 0.0f : r * (wide ? c : s);
+    *dy = centre ? 0.0f : r * (wide ? s : c);
+}
+
 /* phase_direction_at (phase.h): make_frame's basis about the unit `peak`, then normalized */
 inline V3 lanes_direction_at(V3 n, float w, float u) {
     float sn = sqrt(fmax(0.0f, w * (2.0f - w)));

@@ -62,16 +62,10 @@ inline V3 lanes_to_world(V3 v, V3 s, V3 t, V3 n) {
     return v3(v.x * s.x + v.y * t.x + v.z * n.x, v.x * s.y + v.y * t.y + v.z * n.y, v.x * s.z + v.y * t.z + v.z * n.z);
 }
 
-/* sample_cosine_hemisphere (sampling.h): the concentric disk's two cases as selects */
+/* sample_cosine_hemisphere (sampling.h) */
 inline V3 lanes_cosine_hemisphere(float u0, float u1) {
-    float ox = 2.0f * u0 - 1.0f, oy = 2.0f * u1 - 1.0f;
-    /* |o| two ways: two fabs side by side were packed into a <2 x float> (lanes.h) */
-    bool wide = fabs(ox) > (oy < 0.0f ? -oy : oy);
-    float r = wide ? ox : oy;
-    float a = (VOLCL_PI / 4.0f) * ((wide ? oy : ox) / r);
-    float c = cos_small(a), s = sin_small(a);
-    bool centre = (ox == 0.0f) & (oy == 0.0f);
-    float dx = centre ? 0.0f : r * (wide ? c : s), dy = centre ? 0.0f : r * (wide ? s : c);
+    float dx, dy;
+    lanes_concentric_disk(u0, u1, &dx, &dy);
     return v3(dx, dy, sqrt(fmax(0.0f, 1.0f - dx * dx - dy * dy)));
 }
 

@@ -458,19 +458,6 @@ inline V3 sh_eval(const ShadeBsdf *pb, __global const float *table, V3 color, V3
     return v3_sel(valid, value, v3(0.0f, 0.0f, 0.0f));
 }
 
-/* sample_concentric_disk (sampling.h): its two cases as selects (lanes_surface.h's
- * lanes_cosine_hemisphere) */
-inline void sh_disk(float u0, float u1, float *dx, float *dy) {
-    float ox = 2.0f * u0 - 1.0f, oy = 2.0f * u1 - 1.0f;
-    bool wide = fabs(ox) > (oy < 0.0f ? -oy : oy);
-    float r = wide ? ox : oy;
-    float a = (VOLCL_PI / 4.0f) * ((wide ? oy : ox) / r);
-    float c = cos_small(a), s = sin_small(a);
-    bool centre = (ox == 0.0f) & (oy == 0.0f);
-    *dx = centre ? 0.0f : r * (wide ? c : s);
-    *dy = centre ? 0.0f : r * (wide ? s : c);
-}
-
 /* microfacet_sample (microfacet.h), GGX, visible normals: the normal only (roughplastic drops its pdf) */
 inline V3 sh_ggx_sample(float au, float av, V3 wi, float u0, float u1) {
     /* each y below waits on its x (lanes_after): the pairs were packed into <2 x float> */
@@ -488,7 +475,7 @@ inline V3 sh_ggx_sample(float au, float av, V3 wi, float u0, float u1) {
     /* microfacet_visible_slope_11, GGX */
     float cos_i = wpz;
     float px, py;
-    sh_disk(u0, u1, &px, &py);
+    lanes_concentric_disk(u0, u1, &px, &py);
     float s = 0.5f * (1.0f + cos_i);
     py = (1.0f - s) * sqrt(fmax(1.0f - px * px, 0.0f)) + s * py;
     float z = sqrt(fmax(1.0f - px * px - py * py, 0.0f));
@@ -538,7 +525,7 @@ inline void sh_shade(__global const Bsdf *bsdfs, __global const Texture *texture
     float t = 2.0f * sh_dot(wo_s, m);
     V3 w_spec = v3(t * m.x - wo_s.x, t * m.y - wo_s.y, t * m.z - wo_s.z);
     float dx, dy;
-    sh_disk(u20_s, u21_s, &dx, &dy);
+    lanes_concentric_disk(u20_s, u21_s, &dx, &dy);
     V3 w_diff = v3(dx, dy, sqrt(fmax(0.0f, 1.0f - dx * dx - dy * dy)));
     V3 ws = v3_sel(u1 < p_spec, w_spec, w_diff);
     float spdf;
