@@ -222,7 +222,10 @@ typedef struct {
     int near_x, near_y, near_z;
 } BoxRay;
 
-inline BoxRay box_ray_make(float3 o, float3 inv_d) {
+inline BoxRay box_ray_make(float3 o, float3 d) {
+    /* a zero direction component becomes a tiny one of the same sign: its slab then spans
+     * +-1e30 instead of producing 0 * INF = NaN for an origin on the slab plane */
+    float3 inv_d = 1.0f / select(d, copysign((float3)(1e-30f), d), fabs(d) < (float3)(1e-30f));
     BoxRay r;
     r.ox = (floatW)(o.x);
     r.oy = (floatW)(o.y);
@@ -240,7 +243,7 @@ inline BoxRay box_ray_make(float3 o, float3 inv_d) {
 /* Entry distances of the ray into the boxes of all children of node n, INF where it misses a box
  * within [0, tmax]. The slab distances are (bound - o) * inv_d, so the exit distance is exact up to
  * one rounding and widening it by a few ulps means rounding never culls a box the ray grazes.
- * inv_d is finite (see bvh_trace), so no product is NaN and plain compares replace fmin/fmax, whose
+ * inv_d is finite (box_ray_make), so no product is NaN and plain compares replace fmin/fmax, whose
  * NaN rules cost extra instructions on every node; the inverted boxes of unused slots give
  * enter = +inf > leave = -inf. */
 __attribute__((always_inline))
@@ -275,6 +278,56 @@ inline int lane_mask(intW m) {
 
 /* Index of the lowest set bit of a non-zero mask (OpenCL C 1.2 has clz but not ctz). */
 inline int lowest_lane(int mask) { return 31 - clz(mask & -mask); }
+
+/* No child entered, or nothing left on the stack (node_visit, stack_next); no node or leaf
+ * reference takes this value. */
+#define VOLCL_NO_CHILD 0x7fffffff
+
+/* A walk's visit of node n: the child to visit next, or VOLCL_NO_CHILD when the ray enters none of
+ * its boxes within tmax. Where it enters several, every one goes on the stack (stack, stack_t,
+ * *top) with its entry distance; for closest hits each goes into this node's run of the stack in
+ * order of entry distance, farthest at the bottom (TRACE_ANY skips the ordering), and the nearest
+ * comes off again as the one returned, having just passed the box test. */
+__attribute__((always_inline))
+inline int node_visit(__global const BvhWideNode *n, const BoxRay *br, float tmax, int mode, int *stack,
+                      float *stack_t, int *top) {
+    floatW entry = node_children_entry(n, br, tmax);
+    int mask = lane_mask(entry < (floatW)(VOLCL_INF));
+    if (mask == 0) return VOLCL_NO_CHILD;
+    int i = lowest_lane(mask);
+    mask &= mask - 1;
+    if (mask == 0) return n->child[i];      /* one child entered: visit it without the stack */
+    float enter[VOLCL_BVH_WIDTH];
+    vstoreW(entry, 0, enter);
+    int base = *top;
+    for (;;) {
+        float t = enter[i];
+        int j = (*top)++;
+        if (mode != TRACE_ANY) {
+            for (; j > base && stack_t[j - 1] < t; --j) {
+                stack[j] = stack[j - 1];
+                stack_t[j] = stack_t[j - 1];
+            }
+        }
+        stack[j] = n->child[i];
+        stack_t[j] = t;
+        if (mask == 0) break;
+        i = lowest_lane(mask);
+        mask &= mask - 1;
+    }
+    return stack[--(*top)];
+}
+
+/* The next stack entry whose box the ray enters before the closest hit t_hit (with the box test's
+ * tolerance), or VOLCL_NO_CHILD when none is left. */
+__attribute__((always_inline))
+inline int stack_next(const int *stack, const float *stack_t, int *top, float t_hit) {
+    do {
+        if (*top == 0) return VOLCL_NO_CHILD;
+        --(*top);
+    } while (stack_t[*top] > t_hit * 1.0000004f);
+    return stack[*top];
+}
 
 #if !VOLCL_HAS_INSTANCES
 #define VOLCL_TRAVERSE_NAME bvh_traverse_scene

@@ -62,47 +62,16 @@ inline int VOLCL_TRAVERSE_NAME(const SceneData *sc, int root, float3 o, float3 d
         return VOLCL_TRAVERSE_LEAVES(sc, rn->child[0], &sh, o, d, mode, hit);
     }
     int ref = root;         /* the node or leaf visited now: the root first */
-    /* a zero direction component becomes a tiny one of the same sign: its slab then spans
-     * +-1e30 instead of producing 0 * INF = NaN for an origin on the slab plane */
-    float3 inv_d = 1.0f / select(d, copysign((float3)(1e-30f), d), fabs(d) < (float3)(1e-30f));
-    BoxRay br = box_ray_make(o, inv_d);
+    BoxRay br = box_ray_make(o, d);
     int stack[VOLCL_BVH_STACK];
     float stack_t[VOLCL_BVH_STACK];
     int top = 0;
     bool found = false;
     for (;;) {
         if (ref >= 0) {
-            __global const BvhWideNode *n = &sc->nodes[ref];
-            floatW entry = node_children_entry(n, &br, hit->t);
-            int mask = lane_mask(entry < (floatW)(VOLCL_INF));
-            if (mask != 0) {
-                int i = lowest_lane(mask);
-                mask &= mask - 1;
-                if (mask == 0) {        /* one child entered: visit it without the stack */
-                    ref = n->child[i];
-                    continue;
-                }
-                float enter[VOLCL_BVH_WIDTH];
-                vstoreW(entry, 0, enter);
-                /* every entered child on the stack; for closest hits each goes into this node's run
-                 * of the stack in order of entry distance, farthest at the bottom */
-                int base = top;
-                for (;;) {
-                    float t = enter[i];
-                    int j = top++;
-                    if (mode != TRACE_ANY) {
-                        for (; j > base && stack_t[j - 1] < t; --j) {
-                            stack[j] = stack[j - 1];
-                            stack_t[j] = stack_t[j - 1];
-                        }
-                    }
-                    stack[j] = n->child[i];
-                    stack_t[j] = t;
-                    if (mask == 0) break;
-                    i = lowest_lane(mask);
-                    mask &= mask - 1;
-                }
-                ref = stack[--top];     /* the nearest, which just passed the box test */
+            int next = node_visit(&sc->nodes[ref], &br, hit->t, mode, stack, stack_t, &top);
+            if (next != VOLCL_NO_CHILD) {
+                ref = next;
                 continue;
             }
         } else {
@@ -110,12 +79,8 @@ inline int VOLCL_TRAVERSE_NAME(const SceneData *sc, int root, float3 o, float3 d
             if (h == 2) return 2;
             found |= h != 0;
         }
-        /* next from the stack, skipping entries whose box the ray enters beyond the closest hit */
-        do {
-            if (top == 0) return found ? 1 : 0;
-            --top;
-        } while (stack_t[top] > hit->t * 1.0000004f);
-        ref = stack[top];
+        ref = stack_next(stack, stack_t, &top, hit->t);
+        if (ref == VOLCL_NO_CHILD) return found ? 1 : 0;
     }
 }
 

@@ -7,7 +7,7 @@
  * taken next) or tests one leaf packet, and pops the stack (culling entries beyond the hit) when
  * the current leaf or node leads nowhere. Its state lives in a struct, so two walks can take turns
  * in one loop; the box test, the packet test and the stack order are bvh.h's own functions and
- * rules, so the hits are the shipped kernel's, bit for bit. Triangles only: analytic lanes are not
+ * rules (node_visit, stack_next), so the hits are the shipped kernel's, bit for bit. Triangles only: analytic lanes are not
  * tested (the study's scenes are meshes).
  *   trace_step_closest   one ray per work-item through the step walk (what the cut alone costs)
  *   trace_pair_closest   rays 2i and 2i + 1 in work-item i, their steps alternating
@@ -17,7 +17,7 @@
 #include "scene.h"
 #include "bvh.h"
 
-#define WALK_DONE 0x7fffffff    /* no node is numbered so: the walk has finished */
+#define WALK_DONE VOLCL_NO_CHILD     /* the walk has finished */
 
 typedef struct {
     Shear sh;
@@ -34,8 +34,7 @@ typedef struct {
 __attribute__((always_inline))
 inline void walk_begin(Walk *w, float3 o, float3 d, float tmax) {
     w->sh = shear_make(o, d);
-    float3 inv_d = 1.0f / select(d, copysign((float3)(1e-30f), d), fabs(d) < (float3)(1e-30f));
-    w->br = box_ray_make(o, inv_d);
+    w->br = box_ray_make(o, d);
     w->hit.t = tmax;
     w->hit.prim = 0;
     w->hit.b1 = w->hit.b2 = 0.0f;
@@ -43,19 +42,6 @@ inline void walk_begin(Walk *w, float3 o, float3 d, float tmax) {
     w->packet = w->packet_end = 0;
     w->top = 0;
     w->found = false;
-}
-
-/* the next entry from the stack whose box the ray enters before the closest hit, or WALK_DONE */
-__attribute__((always_inline))
-inline void walk_pop(Walk *w) {
-    do {
-        if (w->top == 0) {
-            w->ref = WALK_DONE;
-            return;
-        }
-        --w->top;
-    } while (w->stack_t[w->top] > w->hit.t * 1.0000004f);
-    w->ref = w->stack[w->top];
 }
 
 /* one node visit or one packet test (entering a leaf tests its first packet) */
@@ -68,42 +54,14 @@ inline void walk_step(Walk *w, const SceneData *sc) {
             w->packet = leaf >> 4;
             w->packet_end = w->packet + (leaf & 15) + 1;
         } else {
-            __global const BvhWideNode *n = &sc->nodes[ref];
-            floatW entry = node_children_entry(n, &w->br, w->hit.t);
-            int mask = lane_mask(entry < (floatW)(VOLCL_INF));
-            if (mask == 0) {
-                walk_pop(w);
-                return;
-            }
-            int i = lowest_lane(mask);
-            mask &= mask - 1;
-            if (mask == 0) {        /* one child entered: visit it without the stack */
-                w->ref = n->child[i];
-                return;
-            }
-            float enter[VOLCL_BVH_WIDTH];
-            vstoreW(entry, 0, enter);
-            int base = w->top;
-            for (;;) {
-                float t = enter[i];
-                int j = w->top++;
-                for (; j > base && w->stack_t[j - 1] < t; --j) {
-                    w->stack[j] = w->stack[j - 1];
-                    w->stack_t[j] = w->stack_t[j - 1];
-                }
-                w->stack[j] = n->child[i];
-                w->stack_t[j] = t;
-                if (mask == 0) break;
-                i = lowest_lane(mask);
-                mask &= mask - 1;
-            }
-            w->ref = w->stack[--w->top];
+            int next = node_visit(&sc->nodes[ref], &w->br, w->hit.t, TRACE_CLOSEST, w->stack, w->stack_t, &w->top);
+            w->ref = next != VOLCL_NO_CHILD ? next : stack_next(w->stack, w->stack_t, &w->top, w->hit.t);
             return;
         }
     }
     if (packet_triangles_intersect(&sc->leaves[w->packet], &w->sh, w->hit.t, TRACE_CLOSEST, &w->hit))
         w->found = true;
-    if (++w->packet == w->packet_end) walk_pop(w);
+    if (++w->packet == w->packet_end) w->ref = stack_next(w->stack, w->stack_t, &w->top, w->hit.t);
 }
 
 inline SceneData pair_scene(__global const BvhWideNode *nodes, __global const LeafPacket *leaves) {
