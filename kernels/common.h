@@ -36,6 +36,12 @@
 #define VOLCL_KERNEL __kernel __attribute__((vec_type_hint(float4)))
 #endif
 
+/* Whether a surface vertex leaves its NEE shadow ray for the caller to trace (the packet renderer,
+ * packets.cl, traces its lanes' shadow rays together); the megakernel traces each at once. */
+#ifndef VOLCL_DEFER_SHADOWS
+#define VOLCL_DEFER_SHADOWS 0
+#endif
+
 /* A step of the path tracer that PoCL kept out of line, passing the path's state (PathState,
  * SurfacePoint, Hit) through memory at every call: forcing these inline made PoCL's megakernel
  * 1-20% faster with the same bits (README, "Inlining the path's steps"). Forcing every function

@@ -384,6 +384,14 @@ typedef struct {
     float3 prev_p;
     float eta_scale;
     bool do_nee;
+#if VOLCL_DEFER_SHADOWS
+    /* the vertex's NEE shadow ray, left for the packet renderer to trace with its other lanes'
+     * (packets.cl): where nothing blocks it, L += shadow_beta * shadow_value, as path_surface_nee adds */
+    bool shadow;
+    float3 shadow_o, shadow_d, shadow_beta, shadow_value;
+    float shadow_t;
+    int shadow_root;
+#endif
 } PathState;
 
 /* what a step leaves the path to do next */
@@ -507,6 +515,25 @@ inline void path_null_crossing(const SceneData *sc, PathState *ps, const Surface
     ps->o = next;
 }
 
+#if VOLCL_DEFER_SHADOWS
+#if VOLCL_HAS_MEDIA || VOLCL_HAS_NULL_BSDF || VOLCL_HAS_MASK || VOLCL_HAS_THINDIELECTRIC || VOLCL_HAS_EMISSION_NEE
+#error "deferred shadow rays are occlusion queries: every surface opaque, no media"
+#endif
+/* nee_contribution with the shadow ray left untraced: its ray, and what it adds where nothing
+ * blocks it (the transmittance is then exactly 1, so the value has nee_contribution's bits). */
+inline void nee_defer(const SceneData *sc, PathState *ps, const LightSample *ls, float3 f, float scatter_pdf,
+                      float3 origin) {
+    float w = (ls->delta || !sc->params->mis) ? 1.0f : power_heuristic(ls->pdf, scatter_pdf);
+    ps->shadow = true;
+    ps->shadow_o = origin;
+    ps->shadow_d = ls->wi;
+    ps->shadow_t = ls->dist < INFINITY ? ls->dist * 0.9999f : INFINITY;
+    ps->shadow_root = surface_shadow_root(sc, ls);
+    ps->shadow_beta = ps->beta;
+    ps->shadow_value = f * ls->value * (w / ls->pdf);
+}
+#endif
+
 /* Next-event estimation at a surface vertex, MIS against BSDF sampling. Delta BSDFs draw the same
  * random numbers without using them, so the sequence stays aligned whatever the vertex type. */
 VOLCL_STEP_INLINE
@@ -520,9 +547,13 @@ inline void path_surface_nee(const SceneData *sc, Rng *rng, PathState *ps, const
             float pdf;
             float3 f = bsdf_eval(bsdf, wo, ls.wi, &pdf);
             if (max_component(f) > 0.0f) {
+#if VOLCL_DEFER_SHADOWS
+                nee_defer(sc, ps, &ls, f, pdf, offset_origin(s->p, s->mag, s->ng, ls.wi));
+#else
                 ps->L += ps->beta * nee_contribution(sc, surface_shadow_root(sc, &ls), &ls, f, pdf,
                                                      offset_origin(s->p, s->mag, s->ng, ls.wi),
                                                      medium_after(sc, s, ls.wi, ps->medium), rng, cutoffs);
+#endif
             }
         }
     } else {
@@ -651,6 +682,9 @@ inline PathState path_start(const SceneData *sc, float3 o, float3 d, float t_max
     ps.eta_scale = 1.0f;
     ps.do_nee = rp->light_count > 0 && rp->nee;
     ps.t_back = 0.0f;
+#if VOLCL_DEFER_SHADOWS
+    ps.shadow = false;
+#endif
     return ps;
 }
 

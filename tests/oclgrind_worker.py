@@ -14,7 +14,7 @@ sys.path[:0] = [str(HERE), str(HERE.parent)]
 
 from scenebuild import (camera, constant_env, diffuse, furnace, look_at, medium, quad_mesh,  # noqa: E402
                         scene, sphere)
-from volcl import device as devmod, wavefront  # noqa: E402
+from volcl import device as devmod, packets, wavefront  # noqa: E402
 from volcl.features import all_features  # noqa: E402
 from volcl.renderer import Renderer  # noqa: E402
 from volcl.scene import load  # noqa: E402
@@ -144,6 +144,12 @@ def wavefront_medium_stage():
     return WAVEFRONT_MEDIUM(), None, "wavefront"
 
 
+def packet_renderer():
+    """The surface stage's scene through the packet renderer (kernels/packets.cl): its lanes' queries,
+    the shadow rays left for the next step, and lanes that start samples while others finish."""
+    return WAVEFRONT_SURFACE(), None, "packet"
+
+
 def every_feature():
     """The fog scene on the program with every feature compiled in."""
     return load(SCENES / "fog.xml"), all_features()
@@ -175,6 +181,7 @@ FAMILIES = {
     "every_feature": every_feature,
     "wavefront_surface_stage": wavefront_surface_stage,
     "wavefront_medium_stage": wavefront_medium_stage,
+    "packet_renderer": packet_renderer,
 }
 
 
@@ -192,6 +199,11 @@ def main(family, size=8, spp=1):
         # against 12 s for the surface stage's family)
         wavefront.CHECK_EVERY = 1
         r.wavefront = wavefront.Wavefront(r.device, r.features, r.packed, r.group_items)
+    if engine == "packet":
+        # (the simulated device is not a CPU either); two passes in one launch, so that lanes start
+        # a second sample while others still finish their first
+        r.wavefront = packets.Packets(r.device, r.features, r.packed)
+        spp = 2
     res = r.render(spp)
     print(f"{family}: {res.device}, {size}x{size}, {spp} spp, invalid {res.invalid}, "
           f"mean {res.image.mean():.4g}")

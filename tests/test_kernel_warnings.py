@@ -4,12 +4,14 @@ clang's static analyzer, for the program with every feature compiled in; and eve
 unused-parameter and unused-variable family (code a specialization compiles out leaves its
 arguments unused, by design). The wavefront renderer's entry points (wavefront.cl, wavefront_lanes.cl,
 wavefront_surface.cl) are checked with every feature compiled in, with and without the lanes stage's
-whole-scene tests. Skipped, with the reason, where clang is absent (`./quickstart test` installs it)."""
+whole-scene tests, and the packet renderer's (packets.cl) at both packet widths with every feature it
+takes. Skipped, with the reason, where clang is absent (`./quickstart test` installs it)."""
 import shutil
 import subprocess
 
 import pytest
 
+from volcl import packets
 from volcl.features import FLAGS, all_features
 from volcl.program import build_options, kernels_dir
 
@@ -37,19 +39,24 @@ def _specializations():
 # 6 triangles in packets of 4 and 2, 2 spheres, 3 light triangles)
 TINY = ["-DVOLCL_WF_TINY=6", "-DVOLCL_WF_TINY_ENDS=40", "-DVOLCL_WF_SPHERES=2", "-DVOLCL_WF_LIGHT_TRIS=3"]
 ENTRY_POINTS = ["render.cl", "wavefront.cl", "wavefront_lanes.cl", "wavefront.cl tiny", "wavefront_lanes.cl tiny",
-                "wavefront_surface.cl tiny"]
+                "wavefront_surface.cl tiny", "packets.cl 16", "packets.cl 8"]
 
 
 def _compile(args, features, entry="render.cl"):
     name, _, variant = entry.partition(" ")
     extra = TINY if variant == "tiny" else []
+    if name == packets.SOURCE_FILE:     # the features it takes (the others are an #error there)
+        features = {k: v and k not in packets.EXCLUDED for k, v in features.items()}
+        extra = [f"-DVOLCL_PACKET_WIDTH={variant}"]
     cmd = [CLANG] + FRONT_END + args + build_options(features, tuple(extra)) + [str(kernels_dir() / name)]
     return subprocess.run(cmd, capture_output=True, text=True)
 
 
 @pytest.mark.parametrize("entry", ENTRY_POINTS)
 def test_every_feature_compiles_without_warnings(entry):
-    r = _compile(WARNINGS + ["-fsyntax-only"], all_features(), entry)
+    # (the packet renderer's program is a specialization: without media, say, arguments go unused)
+    compiled_out = COMPILED_OUT if entry.startswith(packets.SOURCE_FILE) else []
+    r = _compile(WARNINGS + compiled_out + ["-fsyntax-only"], all_features(), entry)
     assert r.returncode == 0 and "warning" not in r.stderr, r.stderr
 
 

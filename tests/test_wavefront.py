@@ -100,11 +100,11 @@ def test_same_image_as_megakernel(device, name):
 def test_auto_takes_it_where_it_pays(device):
     """"auto" (the default) renders point_in_fog (camera in the fog, a point light) with the wavefront
     renderer on CPUs, the fog box (an area light) with the megakernel, and the Cornell box (no
-    medium: the surface stage) with the wavefront renderer on Intel's CPU runtime alone."""
+    medium, few primitives) with the packet renderer on CPUs (tests/test_packets.py), which it
+    prefers to the surface stage."""
     cpu = device.kind == "cpu"
-    intel = cpu and "intel" in device.platform_name.lower()
     expected = {"point_in_fog": "wavefront" if cpu else "megakernel", "fog": "megakernel",
-                "cbox": "wavefront" if intel else "megakernel"}
+                "cbox": "packet" if cpu else "megakernel"}
     for name, engine in expected.items():
         r = Renderer(volcl.load_file(SCENES / f"{name}.xml", width=8, height=8), device=device)
         assert r.engine == engine, name
@@ -306,6 +306,18 @@ def test_surface_stage_same_image_as_megakernel(device):
     assert_same_image(mk, wf, what="surfaces: megakernel and wavefront")
 
 
+def cbox_with(change, size=8):
+    """cbox with `change` added to it (XML text), or with the camera in a homogeneous medium
+    rendered by volpath ("medium")."""
+    text = (SCENES / "cbox.xml").read_text()
+    if change == "medium":
+        text = text.replace('<scene version="3.0.0">', '<scene version="3.0.0"><medium type="homogeneous" id="m"/>')
+        text = text.replace("<sampler", '<ref id="m"/><sampler').replace('type="path"', 'type="volpath"')
+    else:
+        text = text.replace("</scene>", change + "</scene>")
+    return volcl.load_string(text, base_dir=SCENES, width=size, height=size)
+
+
 @pytest.mark.parametrize("change, why", [
     ('<emitter type="constant"/>', "point lights and area lights on triangles only"),
     ('<shape type="sphere"><float name="radius" value="0.1"/><emitter type="area"/></shape>',
@@ -319,13 +331,7 @@ def test_which_scenes_the_surface_stage_takes(device, change, why):
     medium is the medium stage's)."""
     if device.kind != "cpu":
         pytest.skip("the wavefront renderer is for CPU devices")
-    text = (SCENES / "cbox.xml").read_text()
-    if change == "medium":
-        text = text.replace('<scene version="3.0.0">', '<scene version="3.0.0"><medium type="homogeneous" id="m"/>')
-        text = text.replace("<sampler", '<ref id="m"/><sampler').replace('type="path"', 'type="volpath"')
-    else:
-        text = text.replace("</scene>", change + "</scene>")
-    reason = wavefront.surface_lanes(*_packed(device, volcl.load_string(text, base_dir=SCENES, width=8, height=8)))
+    reason = wavefront.surface_lanes(*_packed(device, cbox_with(change)))
     if why is None:
         assert reason == "the surface stage is for scenes without media"
     else:

@@ -65,8 +65,10 @@ class Renderer:
 
     `slots` and `launch_pixels` (pixels per launch) override the defaults, for tests.
     `engine`: "megakernel", "wavefront" (volcl.wavefront's stage kernels on CPUs: homogeneous media,
-    or small scenes without media; the same samples), or "auto": the wavefront renderer where
-    volcl.wavefront.pays().
+    or small scenes without media; the same samples), "packet" (volcl.packets: a packet of work items
+    per work item on CPUs, its rays traced together in the SIMD lanes, for small scenes of opaque
+    surfaces; the same samples), or "auto": the packet renderer where volcl.packets.supported(),
+    else the wavefront renderer where volcl.wavefront.pays().
     `launch_seconds` is the time budget of one launch: by default GPU_LAUNCH_SECONDS on GPUs and
     none elsewhere (a CPU device runs fixed launches of up to MAX_ITEMS work items, with no timing
     in between). `majorant_cells` applies when a model Scene is packed here.
@@ -145,7 +147,7 @@ class Renderer:
 
     @property
     def engine(self) -> str:
-        return "megakernel" if self.wavefront is None else "wavefront"
+        return "megakernel" if self.wavefront is None else getattr(self.wavefront, "engine", "wavefront")
 
     @property
     def packed(self):

@@ -34,6 +34,7 @@ import numpy as np
 
 from . import device as devmod
 from . import layout
+from . import packets
 from .errors import VolclError
 from .opencl import cl
 from .pack import ARG_ORDER
@@ -72,7 +73,7 @@ LANES_FILE = "wavefront_lanes.cl"
 SURFACE_FILE = "wavefront_surface.cl"
 SCALAR_FILE = "wavefront.cl"
 
-ENGINES = ("auto", "megakernel", "wavefront")
+ENGINES = ("auto", "megakernel", "wavefront", "packet")
 
 
 def supported(features: dict, packed, params, device) -> str | None:
@@ -112,12 +113,21 @@ def pays(features: dict, packed, params, device) -> bool:
 
 def start(engine: str, features: dict, packed, params, device):
     """The engine of a render, with the programs it launches built on `device` and no others:
-    (a Wavefront, or None for the megakernel; those programs as (source file, extra options)).
-    `engine` is "megakernel", "wavefront", or "auto": the wavefront where supported() and pays().
+    (a Wavefront or a volcl.packets.Packets, or None for the megakernel; those programs as (source
+    file, extra options)). `engine` is "megakernel", "wavefront", "packet", or "auto": the packet
+    renderer where volcl.packets.supported() (it was faster than the megakernel on every scene it
+    takes), else the wavefront where supported() and pays().
     A render on several devices calls this on each before its tiles' renderers do (which then
     find the programs built)."""
     if engine not in ENGINES:
         raise VolclError(f"engine {engine!r}: expected one of {', '.join(ENGINES)}")
+    if engine in ("packet", "auto"):
+        why_not = packets.supported(features, packed, params, device)
+        if why_not is not None and engine == "packet":
+            raise VolclError(f"the packet renderer cannot render this scene: {why_not}")
+        if why_not is None:
+            pk = packets.Packets(device, features, packed)
+            return pk, pk.sources
     if engine != "megakernel":
         why_not = supported(features, packed, params, device)
         if why_not is not None and engine == "wavefront":

@@ -1,0 +1,143 @@
+"""The packet renderer (volcl/packets.py, kernels/packets.cl) renders the megakernel's samples: its
+lanes run the megakernel's path functions and its queries make the tree's tests with the tree's
+arithmetic, so one seed gives the megakernel's image (bit for bit on PoCL and Intel's runtime on the
+AMD AVX-512 host), across the estimator choices, several passes per launch, slots and tiles; two
+seeds the same image within the standard errors; and it says why it will not render a scene outside
+its case."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import volcl
+from imagestats import assert_same_image
+from test_wavefront import SURFACES, cbox_with
+from volcl import packets
+from volcl.errors import VolclError
+from volcl.estimator import Estimator
+from volcl.renderer import Renderer
+from volcl.tiles import Tile
+
+pytestmark = pytest.mark.every_implementation
+
+SCENES = Path(__file__).resolve().parent.parent / "scenes"
+
+CASES = {
+    "default": (Estimator(), {}),
+    "MIS off": (Estimator(mis=False), {}),
+    "NEE off": (Estimator(nee=False), {}),
+    "max_depth 3": (Estimator(), {"max_depth": 3}),
+}
+
+
+def _cpu(device):
+    if device.kind != "cpu":
+        pytest.skip("the packet renderer is for CPU devices")
+
+
+def _scene(name, size=24, **defaults):
+    """cbox (area light, mirror and glass spheres), the surface stage's test scene (a two-sided box,
+    two area lights and a point light, a diffuse and a glass sphere), textured_cbox (rough bsdfs,
+    bitmaps, bump and normal maps), and cbox under a constant environment (NEE whose shadow rays
+    are traced in the whole scene, beside the area light's in the tree without the box's hull) and
+    with hidden emitters (camera rays pass through the light: no roulette there)."""
+    if name == "surfaces":
+        return volcl.load_string(SURFACES, **defaults)
+    if name in ("cbox_sky", "cbox_hidden"):
+        text = (SCENES / "cbox.xml").read_text()
+        if name == "cbox_sky":
+            text = text.replace("</scene>", '<emitter type="constant"><rgb name="radiance" value="0.5"/></emitter></scene>')
+        else:
+            text = text.replace('<integrator type="path">', '<integrator type="path"><boolean name="hide_emitters" value="true"/>')
+        return volcl.load_string(text, base_dir=SCENES, width=size, height=size, **defaults)
+    return volcl.load_file(SCENES / f"{name}.xml", width=size, height=size, **defaults)
+
+
+def _pair(device, scene, estimator, spp, seeds=(3, 3), tile=None):
+    mk = Renderer(scene, device=device, estimator=estimator, seed=seeds[0], engine="megakernel", tile=tile)
+    pk = Renderer(scene, device=device, estimator=estimator, seed=seeds[1], engine="packet", tile=tile)
+    assert mk.engine == "megakernel" and pk.engine == "packet"
+    return mk.render(spp), pk.render(spp)
+
+
+def _channels_off(image, reference, limit):
+    rel = np.abs(image - reference) / np.maximum(np.abs(reference), 1e-6)
+    return float(np.mean(rel > limit))
+
+
+def _assert_same_paths(mk, pk):
+    """One seed: the megakernel's image. The limit of 1e-5 on 1% of the channels leaves another
+    compiler room to contract a multiply-add differently, and the tree room to let the other of two
+    primitives at the same distance win."""
+    assert mk.image.mean() > 0.01, "a black image compares nothing"
+    assert mk.invalid == 0 and pk.invalid == 0
+    off = _channels_off(pk.image, mk.image, 1e-5)
+    assert off < 0.01, f"{off:.3%} of pixel channels differ by more than 1e-5"
+    np.testing.assert_allclose(pk.image.mean(), mk.image.mean(), rtol=1e-5)
+
+
+@pytest.mark.parametrize("name", ["cbox", "surfaces", "textured_cbox", "cbox_sky", "cbox_hidden"])
+@pytest.mark.parametrize("what", sorted(CASES))
+def test_same_paths_as_megakernel(device, name, what):
+    _cpu(device)
+    estimator, defaults = CASES[what]
+    _assert_same_paths(*_pair(device, _scene(name, **defaults), estimator, 4))
+
+
+def test_same_paths_over_passes_slots_and_tiles(device):
+    """64x64 pixels take 4 slots, so 16 spp are 4 passes in one launch: lanes start their next
+    samples while others finish theirs, some with a shadow ray untraced; 8x8 pixels take 256 slots
+    (work items of one pixel's samples side by side in a packet); a tile renders the pixels the
+    whole image renders there."""
+    _cpu(device)
+    _assert_same_paths(*_pair(device, _scene("cbox", 64), Estimator(), 16))
+    _assert_same_paths(*_pair(device, _scene("textured_cbox", 8), Estimator(), 300))
+    tile = Tile(5, 7, 13, 11)
+    mk, pk = _pair(device, _scene("cbox", 32), Estimator(), 8, tile=tile)
+    _assert_same_paths(mk, pk)
+    whole = Renderer(_scene("cbox", 32), device=device, seed=3, engine="megakernel").render(8).image
+    np.testing.assert_array_equal(mk.image, whole[7:18, 5:18])
+
+
+@pytest.mark.parametrize("name", ["surfaces", "textured_cbox"])
+def test_same_image_as_megakernel(device, name):
+    """Two seeds: the megakernel's image within the standard errors, over 4 x 4 blocks."""
+    _cpu(device)
+    mk, pk = _pair(device, _scene(name, 32), Estimator(), 64, seeds=(1, 2))
+    assert mk.image.mean() > 0.01, "a black image compares nothing"
+    assert_same_image(mk, pk, what=f"{name}: megakernel and packet renderer")
+
+
+def test_auto_takes_it_on_cpus(device):
+    """"auto" renders the scenes the packet renderer takes with it on CPUs, and elsewhere the
+    megakernel."""
+    for name in ("cbox", "textured_cbox"):
+        r = Renderer(_scene(name, 8), device=device)
+        assert r.engine == ("packet" if device.kind == "cpu" else "megakernel"), name
+
+
+def _packed(device, scene):
+    r = Renderer(scene, device=device, engine="megakernel")
+    return r.features, r.packed, r.params, r.device
+
+
+@pytest.mark.parametrize("change, why", [
+    ('<shape type="obj"><string name="filename" value="meshes/glass_sphere.obj"/></shape>', "primitives"),
+    ('<shape type="sphere"><float name="radius" value="0.2"/><bsdf type="null"/></shape>', "NULL_BSDF"),
+    ('<shape type="sphere"><float name="radius" value="0.2"/><bsdf type="thindielectric"/></shape>', "THINDIELECTRIC"),
+    ('<shape type="cylinder"><float name="radius" value="0.1"/></shape>', "CYLINDERS"),
+    ('medium', "MEDIA"),
+])
+def test_which_scenes_it_takes(device, change, why):
+    """Every surface opaque (a shadow ray is an occlusion query), no media, instances or cylinders,
+    and few enough primitives to test every one for every ray: it says why it will not take the
+    others, and a render that asks for it gets that reason."""
+    scene = cbox_with(change)
+    reason = packets.supported(*_packed(device, scene))
+    if device.kind != "cpu":
+        assert reason == "the packet renderer is written for a CPU's SIMD lanes"
+        return
+    assert reason is not None and why in reason, reason
+    with pytest.raises(VolclError, match="packet renderer cannot render this scene"):
+        Renderer(scene, device=device, engine="packet")
+    assert packets.supported(*_packed(device, _scene("cbox", 8))) is None
