@@ -12,7 +12,7 @@ import pytest
 import volcl
 from imagestats import assert_same_image
 from test_wavefront import SURFACES, cbox_with
-from volcl import packets
+from volcl import packets, selftest
 from volcl.errors import VolclError
 from volcl.estimator import Estimator
 from volcl.renderer import Renderer
@@ -141,3 +141,18 @@ def test_which_scenes_it_takes(device, change, why):
     with pytest.raises(VolclError, match="packet renderer cannot render this scene"):
         Renderer(scene, device=device, engine="packet")
     assert packets.supported(*_packed(device, _scene("cbox", 8))) is None
+
+
+def test_self_test_renders_through_it(device, monkeypatch):
+    """On CPUs the device self-test renders its bare wall through the packet renderer, and a
+    packet renderer whose queries find nothing fails it."""
+    _cpu(device)
+    assert selftest._bare_wall_failures(device) == []
+    made = packets.Packets.__init__
+
+    def blind(self, *args):
+        made(self, *args)
+        self.leaf_ends = (np.int32(0), np.int32(0))
+    monkeypatch.setattr(packets.Packets, "__init__", blind)
+    failures = selftest._bare_wall_failures(device)
+    assert failures and "packet renderer" in failures[0], failures

@@ -40,9 +40,14 @@ def primitive_count(packed) -> int:
     return int(used.sum())
 
 
+def runs_on(device) -> bool:
+    """Whether the packet renderer renders on this device (volcl.device.Device): CPUs."""
+    return device.kind == "cpu"
+
+
 def supported(features: dict, packed, params, device) -> str | None:
     """Why the packet renderer cannot render this, or None when it can."""
-    if device.kind != "cpu":
+    if not runs_on(device):
         return "the packet renderer is written for a CPU's SIMD lanes"
     for name in EXCLUDED:
         if features.get(name):

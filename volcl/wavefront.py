@@ -102,7 +102,8 @@ def pays(features: dict, packed, params, device) -> bool:
       point_in_fog: 1.84x the megakernel's speed on PoCL and 2.25x on Intel's runtime (tested
       whole, tiny_lanes; 1.03-1.26x and 1.22-1.48x through the BVH); scenes with area or
       environment lights, or the camera outside the medium, 0.45x-0.83x;
-    - without media (the surface stage), where surface_stage_pays() says so."""
+    - without media (the surface stage), where surface_stage_pays() says so; start() gives every
+      such scene to the packet renderer first (volcl.packets), which takes them all."""
     lights = packed.arrays["lights"]
     if not features.get("MEDIA"):
         return surface_stage_pays(device)
