@@ -3,9 +3,11 @@ each OpenCL implementation present (or --device), render alone, interleaved.
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/packets.py [--scenes scenes/cbox.xml scenes/textured_cbox.xml]
         [--size 128x128] [--spp 64] [--rounds 3] [--icospheres 0 1 2] [--widths 8 16] [--groups 1 64]
+        [--vector-step on off]
 
 Prints, in Markdown, for each scene and implementation: M samples per second (wall) of the
-megakernel and of the packet renderer at each packet width and packets per work-group, Renderer.render
+megakernel and of the packet renderer at each packet width, packets per work-group and with or
+without its vector step for diffuse lanes (kernels/packet_lanes.h), Renderer.render
 after a 1-spp warm-up, best of --rounds, all of them interleaved in every round; the ratio to the
 megakernel (above 1: faster); and whether the image has the megakernel's bits with the same seed.
 --icospheres adds variants of the first scene with a diffuse icosphere of that many subdivisions
@@ -55,6 +57,7 @@ def main(argv=None):
     p.add_argument("--icospheres", nargs="*", type=int, default=[])
     p.add_argument("--widths", nargs="+", type=int, default=[16])
     p.add_argument("--groups", nargs="+", type=int, default=[1])
+    p.add_argument("--vector-step", nargs="+", choices=["on", "off"], default=["on"])
     args = p.parse_args(argv)
     import volcl
     from volcl import device as devmod, packets
@@ -63,24 +66,29 @@ def main(argv=None):
     devices = [devmod.resolve(args.device)] if args.device else [d for d in devmod.list_devices() if d.kind == "cpu"]
     folder = Path(tempfile.mkdtemp(prefix="volcl-packets-"))
     scenes = list(args.scenes) + [icosphere_variant(args.scenes[0], s, folder) for s in args.icospheres]
-    configs = [(w, g) for w in args.widths for g in args.groups]
+    configs = [(w, g, v == "on") for w in args.widths for g in args.groups for v in args.vector_step]
     print(f"- CPU: {cpu_model()}; {width}x{height}, {args.spp} spp, best of {args.rounds} interleaved rounds\n")
     print("| scene | device | primitives | megakernel M samples/s | "
-          + " | ".join(f"packet {w} lanes, {g}/group" for w, g in configs) + " | same bits |")
+          + " | ".join(f"packet {w} lanes, {g}/group{'' if v else ', scalar steps'}" for w, g, v in configs)
+          + " | same bits |")
     print("|---|---|---|---|" + "---|" * len(configs) + "---|")
     for path in scenes:
         for dev in devices:
             scene = volcl.load_file(path, width=width, height=height)
             log(f"{path.name} on {dev.name}")
             limit, packets.MAX_PRIMITIVES = packets.MAX_PRIMITIVES, 1 << 30
+            saved = packets.PACKET_WIDTH, packets.GROUP_PACKETS
             try:
                 renderers = [Renderer(scene, device=dev, engine="megakernel")]
-                for w, g in configs:
+                for w, g, v in configs:
                     packets.PACKET_WIDTH, packets.GROUP_PACKETS = w, g
-                    renderers.append(Renderer(scene, device=dev, engine="packet"))
+                    r = Renderer(scene, device=dev, engine="packet")
+                    # on or off whichever the device's default (packets.vector_step_pays)
+                    r.wavefront = packets.Packets(r.device, r.features, r.packed, vector_step=v)
+                    renderers.append(r)
             finally:
                 packets.MAX_PRIMITIVES = limit
-                packets.PACKET_WIDTH, packets.GROUP_PACKETS = 16, 1
+                packets.PACKET_WIDTH, packets.GROUP_PACKETS = saved
             for r in renderers:
                 r.render(1)
             best, images = [0.0] * len(renderers), [None] * len(renderers)

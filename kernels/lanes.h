@@ -43,6 +43,12 @@ inline float v3_max(V3 a) { return fmax(a.x, fmax(a.y, a.z)); }
 inline V3 v3_sel(bool c, V3 a, V3 b) { return v3(c ? a.x : b.x, c ? a.y : b.y, c ? a.z : b.z); }
 inline V3 lanes_div(V3 v, float s) { return v3(v.x / s, v.y / s, v.z / s); }
 
+/* dot(a, b) as the OpenCL library computes it (no fused multiply-add) */
+inline float lanes_dot(V3 a, V3 b) {
+#pragma OPENCL FP_CONTRACT OFF
+    return (a.x * b.x + a.y * b.y) + a.z * b.z;
+}
+
 /* v, made to depend on `dep` (exactly v, whatever dep is): two isomorphic computations side by side
  * (two shadow rays' tests and transmittances) were packed into <2 x float> vectors by the SLP
  * vectorizer, which stops the loop vectorizer; one that needs the other's result cannot be packed

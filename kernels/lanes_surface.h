@@ -37,6 +37,23 @@ inline LanesTriangle lanes_triangle_at(__global const float *table, int slot) {
     return t;
 }
 
+/* Triangle `slot` of the table (0 <= slot < VOLCL_WF_TINY): a gather per number, where the slots
+ * are too many for a select per slot (the packet renderer's, up to volcl.packets.MAX_PRIMITIVES) */
+inline LanesTriangle lanes_triangle_gather(__global const float *table, int slot) {
+    LanesTriangle t;
+#define TV(c) table[WF_TRI_AT(c, slot)]
+    t.p0 = v3(TV(0), TV(1), TV(2));
+    t.p1 = v3(TV(3), TV(4), TV(5));
+    t.p2 = v3(TV(6), TV(7), TV(8));
+    t.ng = v3(TV(WF_TRI_NG), TV(WF_TRI_NG + 1), TV(WF_TRI_NG + 2));
+    t.color = v3(TV(WF_TRI_COLOR), TV(WF_TRI_COLOR + 1), TV(WF_TRI_COLOR + 2));
+    t.mag = TV(WF_TRI_MAG);
+    t.lanes = TV(WF_TRI_LANES);
+    t.twosided = TV(WF_TRI_TWOSIDED);
+#undef TV
+    return t;
+}
+
 /* surface_point (surface.h) on a triangle: the barycentric point pulled a hair into it */
 inline V3 lanes_surface_point(const LanesTriangle *t, float hit_b1, float hit_b2) {
     float b1 = fmax(hit_b1, 1e-5f), b2 = fmax(hit_b2, 1e-5f), b0 = fmax(1.0f - hit_b1 - hit_b2, 1e-5f);
@@ -133,6 +150,56 @@ inline bool lanes_light_sample(__global const float *table, V3 ref, int li, int 
     ls->pdf = point ? choice : choice * d2 / (cos_l * TROW(WF_T_AREA, li));
     ls->delta = point;
     return (d2 > 0.0f) & (point | (cos_l > 0.0f));
+}
+
+/* A plain diffuse triangle's vertex as surface_point and bsdf_vertex_at make it, for the ray
+ * direction d and the hit's barycentrics: the point, the frame about the geometric normal, the
+ * normal (turned towards wo on a two-sided bsdf seen from behind, after the frame is made) and wo's
+ * cosine to it. */
+inline void lanes_diffuse_vertex(const LanesTriangle *tri, float b1, float b2, V3 d, V3 *p, V3 *frame_s,
+                                 V3 *frame_t, V3 *n, float *wo_z) {
+    *p = lanes_surface_point(tri, b1, b2);
+    V3 ng = tri->ng, wo = v3(-d.x, -d.y, -d.z);
+    lanes_make_frame(ng, frame_s, frame_t);
+    bool flip = (tri->twosided > 0.0f) & (lanes_dot(wo, ng) < 0.0f);
+    *n = v3_sel(flip, v3(-ng.x, -ng.y, -ng.z), ng);
+    *wo_z = lanes_dot(wo, *n);
+}
+
+/* path_surface_nee at such a vertex: three numbers drawn where it scatters (`scatter`), a light
+ * sampled where the path does next-event estimation (`do_nee`); whether that leaves a shadow ray
+ * (towards ls->wi, ls->dist away), and what the ray brings where nothing blocks it: f Le w / pdf. */
+inline bool lanes_diffuse_nee(__global const float *table, __global const RenderParams *rp, V3 color, V3 p, V3 n,
+                              float wo_z, bool scatter, bool do_nee, Rng32 *rng, LanesLight *ls, V3 *value) {
+    float u_pick = rng32_float_if(rng, scatter);
+    float ul_x = rng32_float_if(rng, scatter), ul_y = rng32_float_if(rng, scatter);
+    int count = rp->light_count;
+    int li = clamp((int)(u_pick * (float)count), 0, max(count - 1, 0));
+    bool nee = scatter & do_nee;
+    nee = nee & lanes_light_sample(table, p, li, count, ul_x, ul_y, ls);
+    float value_max = v3_max(ls->value);
+    float wi_z = lanes_dot(ls->wi, n);
+    float pdf_b = wi_z * VOLCL_INV_PI;
+    V3 f = v3_scale(color, wi_z * VOLCL_INV_PI);
+    /* (the two maxima side by side were packed into a <2 x float>: lanes.h) */
+    nee = nee & (value_max > 0.0f) & (wo_z > 0.0f) & (wi_z > 0.0f) & (lanes_after(v3_max(f), value_max) > 0.0f);
+    float w = (ls->delta | !rp->mis) ? 1.0f : lanes_power_heuristic(ls->pdf, pdf_b);
+    *value = v3_scale(v3_mul(f, ls->value), w / ls->pdf);
+    return nee;
+}
+
+/* bsdf_sample at such a vertex: the cosine-weighted direction, three numbers drawn where the path
+ * samples one (`sampling`), the first unused; whether the path goes on, its direction and pdf. The
+ * first number used waits for `dep` (lanes_after): the wavefront's shadow ray traced just before,
+ * whose set-up side by side with this one's was packed into <2 x float> vectors. */
+inline bool lanes_diffuse_bounce(Rng32 *rng, bool sampling, float dep, V3 frame_s, V3 frame_t, V3 n, float wo_z,
+                                 V3 *wi, float *pdf) {
+    rng32_float_if(rng, sampling);
+    float u0 = rng32_float_if(rng, sampling), u1 = rng32_float_if(rng, sampling);
+    V3 wl = lanes_cosine_hemisphere(lanes_after(u0, dep), u1);
+    *pdf = wl.z > 0.0f ? wl.z * VOLCL_INV_PI : 0.0f;
+    *wi = lanes_to_world(wl, frame_s, frame_t, n);
+    return sampling & (wo_z > 0.0f) & (*pdf > 0.0f);
 }
 
 #endif

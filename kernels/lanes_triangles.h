@@ -94,12 +94,6 @@ inline bool lanes_triangle_hit(__global const float *table, int k, const LanesSh
     return !outside & (*det != 0.0f) & in_range;
 }
 
-/* dot(a, b) as the OpenCL library computes it (no fused multiply-add) */
-inline float lanes_dot(V3 a, V3 b) {
-#pragma OPENCL FP_CONTRACT OFF
-    return (a.x * b.x + a.y * b.y) + a.z * b.z;
-}
-
 /* sphere_intersect (bvh.h) on sphere k of the table: the same arithmetic, selects for its branches */
 inline bool lanes_sphere_hit(__global const float *table, int k, V3 o, V3 d, float tmax, float *t_out) {
 #define VOLCL_SV(c) table[WF_SPH_AT(c, k)]

@@ -18,6 +18,12 @@
 #define VOLCL_DEFER_SHADOWS 1
 #include "renderer.h"
 #include "packet_queries.h"
+#ifndef VOLCL_PACKET_LANES
+#define VOLCL_PACKET_LANES 0
+#endif
+#if VOLCL_PACKET_LANES
+#include "packet_lanes.h"
+#endif
 
 #define PW VOLCL_PACKET_WIDTH
 
@@ -41,11 +47,91 @@ inline bool lane_start(const SceneData *sc, __global const float *filter_table, 
     return true;
 }
 
+/* Lane l's sample is done but for the shadow ray its last vertex may have left: the lane starts its
+ * next sample, and the finished one is added now, or kept (done_L, finishing) with that ray, which
+ * stays with the lane while its next sample starts. */
+inline void lane_finish(const SceneData *sc, __global const float *filter_table, LaneJob *job, int passes,
+                        uint sample_base, int slots, PathState *ps, Rng *rng, bool *alive, bool *finishing,
+                        float3 *done_L, __global float4 *sums, __global float4 *sums_sq, __global uint *invalid,
+                        __global uint *cutoffs) {
+    PathState last = *ps;
+    ++job->pass;
+    *alive = lane_start(sc, filter_table, job, passes, sample_base, slots, ps, rng);
+    if (last.shadow) {
+        *finishing = true;
+        *done_L = last.L;
+        ps->shadow = true;
+        ps->shadow_o = last.shadow_o;
+        ps->shadow_d = last.shadow_d;
+        ps->shadow_t = last.shadow_t;
+        ps->shadow_root = last.shadow_root;
+        ps->shadow_beta = last.shadow_beta;
+        ps->shadow_value = last.shadow_value;
+    } else {
+        sample_add(last.L, 0u, job->out, sums, sums_sq, invalid, cutoffs);
+    }
+}
+
+#if VOLCL_PACKET_LANES
+/* Lane l's entries of the vector step: its path's, where it takes the step (slot: its triangle's in
+ * the table), else zeros, which it runs on unused. */
+inline void lane_load(PacketLanes *z, int l, int slot, const PathState *ps, const Rng *rng, const Hit *h) {
+    bool take = slot >= 0;
+    z->take[l] = take;
+    z->slot[l] = take ? slot : 0;
+    z->depth[l] = take ? ps->depth : 0;
+    z->do_nee[l] = take && ps->do_nee;
+    float3 d = take ? ps->d : (float3)(0.0f), beta = take ? ps->beta : (float3)(0.0f);
+    z->dx[l] = d.x;
+    z->dy[l] = d.y;
+    z->dz[l] = d.z;
+    z->bx[l] = beta.x;
+    z->by[l] = beta.y;
+    z->bz[l] = beta.z;
+    z->b1[l] = take ? h->b1 : 0.0f;
+    z->b2[l] = take ? h->b2 : 0.0f;
+    z->eta[l] = take ? ps->eta_scale : 1.0f;
+    ulong state = take ? rng->state : 0ul, inc = take ? rng->inc : 0ul;
+    z->rlo[l] = (uint)state;
+    z->rhi[l] = (uint)(state >> 32);
+    z->rinc_lo[l] = (uint)inc;
+    z->rinc_hi[l] = (uint)(inc >> 32);
+}
+
+/* What lane l's vector step did to its path, as path_surface_event and path_roulette would have
+ * left it: the shadow ray (nee_defer's), the generator, and the scattered ray where it goes on.
+ * Whether the path ended. */
+inline bool lane_store(const PacketLanes *z, int l, int shadow_root, PathState *ps, Rng *rng) {
+    if (z->shadow[l]) {
+        ps->shadow = true;
+        ps->shadow_o = (float3)(z->sox[l], z->soy[l], z->soz[l]);
+        ps->shadow_d = (float3)(z->sdx[l], z->sdy[l], z->sdz[l]);
+        ps->shadow_t = z->st[l];
+        ps->shadow_root = shadow_root;  /* (the light samples are points of the scene) */
+        ps->shadow_beta = ps->beta;
+        ps->shadow_value = (float3)(z->svx[l], z->svy[l], z->svz[l]);
+    }
+    rng->state = ((ulong)z->rhi[l] << 32) | (ulong)z->rlo[l];
+    if (!z->going[l]) return true;
+    ps->beta = (float3)(z->bx[l], z->by[l], z->bz[l]);
+    ps->specular = false;
+    ps->prev_pdf = z->pdf[l];
+    ps->prev_p = (float3)(z->px[l], z->py[l], z->pz[l]);
+    ps->o = (float3)(z->ox[l], z->oy[l], z->oz[l]);
+    ps->t_back = z->t_back[l];
+    ps->d = (float3)(z->dx[l], z->dy[l], z->dz[l]);
+    ps->t_max = INFINITY;
+    ++ps->depth;
+    return false;
+}
+#endif
+
 VOLCL_KERNEL void render_packets(VOLCL_SCENE_ARGS,
                              __global float4 *sums, __global float4 *sums_sq, __global uint *invalid,
                              __global uint *cutoffs,
                              uint sample_base, int tile_x, int tile_y, int tile_w, int tile_pixels,
-                             int first, int count, int slots, int passes, int scene_leaves, int shadow_leaves) {
+                             int first, int count, int slots, int passes, int scene_leaves, int shadow_leaves,
+                             __global const float *lanes_table, __global const int *lanes_slots) {
     SceneData sc = VOLCL_SCENE_DATA;
     int base = (int)get_global_id(0) * PW;
     LaneJob job[PW];
@@ -130,8 +216,12 @@ VOLCL_KERNEL void render_packets(VOLCL_SCENE_ARGS,
                                      &s, Ox, Oy, Oz, Dx, Dy, Dz, vloadP(0, st_shadow));
             vstoreP(b, 0, blocked);
         }
-        /* each lane's step, as integrator_radiance takes it */
-        live = 0;
+        /* each lane's step, as integrator_radiance takes it; the lanes whose rays hit a plain diffuse
+         * triangle take theirs together in the vector step, after the others' */
+#if VOLCL_PACKET_LANES
+        PacketLanes z;
+        bool any_lanes = false;
+#endif
         for (int l = 0; l < PW; ++l) {
             if (ps[l].shadow) {
                 ps[l].shadow = false;
@@ -144,38 +234,40 @@ VOLCL_KERNEL void render_packets(VOLCL_SCENE_ARGS,
                 finishing[l] = false;
                 sample_add(done_L[l], 0u, job[l].out, sums, sums_sq, invalid, cutoffs);
             }
-            if (!alive[l]) continue;
             Hit h;
             h.t = ht[l];
             h.prim = hprim[l];
             h.b1 = hb1[l];
             h.b2 = hb2[l];
-            bool hit = h.t < ps[l].t_max;
+            bool hit = alive[l] && h.t < ps[l].t_max;
+#if VOLCL_PACKET_LANES
+            int slot = hit && h.prim >= 0 ? lanes_slots[h.prim] : -1;
+            lane_load(&z, l, slot, &ps[l], &rng[l], &h);
+            any_lanes |= slot >= 0;
+            if (slot >= 0) continue;
+#endif
+            if (!alive[l]) continue;
             uint cut = 0u;
             int next = path_surface_event(&sc, &rng[l], &ps[l], hit, &h, &cut);
             bool ended = next == PATH_END || (next != PATH_CROSSED && !path_roulette(&sc, &rng[l], &ps[l]))
                          || ++job[l].steps >= VOLCL_MAX_STEPS;
-            if (ended) {
-                /* the sample is done but for the shadow ray its last vertex may have left, which
-                 * stays with the lane for it while the lane's next sample starts */
-                PathState last = ps[l];
-                ++job[l].pass;
-                alive[l] = lane_start(&sc, filter_table, &job[l], passes, sample_base, slots, &ps[l], &rng[l]);
-                if (last.shadow) {
-                    finishing[l] = true;
-                    done_L[l] = last.L;
-                    ps[l].shadow = true;
-                    ps[l].shadow_o = last.shadow_o;
-                    ps[l].shadow_d = last.shadow_d;
-                    ps[l].shadow_t = last.shadow_t;
-                    ps[l].shadow_root = last.shadow_root;
-                    ps[l].shadow_beta = last.shadow_beta;
-                    ps[l].shadow_value = last.shadow_value;
-                } else {
-                    sample_add(last.L, 0u, job[l].out, sums, sums_sq, invalid, cutoffs);
-                }
-            }
-            live += alive[l] || finishing[l];
+            if (ended)
+                lane_finish(&sc, filter_table, &job[l], passes, sample_base, slots, &ps[l], &rng[l], &alive[l],
+                            &finishing[l], &done_L[l], sums, sums_sq, invalid, cutoffs);
         }
+#if VOLCL_PACKET_LANES
+        if (any_lanes) {
+            packet_lanes_step(lanes_table, params, &z);
+            for (int l = 0; l < PW; ++l) {
+                if (!z.take[l]) continue;
+                bool ended = lane_store(&z, l, shadow_root, &ps[l], &rng[l]) || ++job[l].steps >= VOLCL_MAX_STEPS;
+                if (ended)
+                    lane_finish(&sc, filter_table, &job[l], passes, sample_base, slots, &ps[l], &rng[l], &alive[l],
+                                &finishing[l], &done_L[l], sums, sums_sq, invalid, cutoffs);
+            }
+        }
+#endif
+        live = 0;
+        for (int l = 0; l < PW; ++l) live += alive[l] || finishing[l];
     }
 }

@@ -40,50 +40,27 @@ __kernel void wavefront_surface(__global float *fs, __global int *is, __global c
     bool at_limit = rp->max_depth >= 0 && depth + 1 >= rp->max_depth;
     bool scatter = surf & !at_limit;    /* a diffuse surface passes nothing at the depth limit */
 
-    V3 p = lanes_surface_point(&tri, hit_b1, hit_b2), ng = tri.ng, color = tri.color;
-    V3 wo = v3(-d.x, -d.y, -d.z);
-    /* bsdf_vertex_at: the frame about the normal; a two-sided bsdf seen from behind turns the
-     * normal (after the frame is made) */
-    V3 frame_s, frame_t;
-    lanes_make_frame(ng, &frame_s, &frame_t);
-    bool flip = (tri.twosided > 0.0f) & (lanes_dot(wo, ng) < 0.0f);
-    V3 n = v3_sel(flip, v3(-ng.x, -ng.y, -ng.z), ng);
-    float wo_z = lanes_dot(wo, n);
+    V3 p, frame_s, frame_t, n;
+    float wo_z;
+    lanes_diffuse_vertex(&tri, hit_b1, hit_b2, d, &p, &frame_s, &frame_t, &n, &wo_z);
+    V3 ng = tri.ng;
 
-    /* path_surface_nee */
     Rng32 rng = {(uint)IROW(WF_RNG), (uint)IROW(WF_RNG + 1), (uint)IROW(WF_RNG + 2), (uint)IROW(WF_RNG + 3)};
-    float u_pick = rng32_float_if(&rng, scatter);
-    float ul_x = rng32_float_if(&rng, scatter), ul_y = rng32_float_if(&rng, scatter);
-    int count = rp->light_count;
-    int li = clamp((int)(u_pick * (float)count), 0, max(count - 1, 0));
     LanesLight ls;
-    bool nee = scatter & ((flags & WF_FLAG_DO_NEE) != 0u);
-    nee = nee & lanes_light_sample(table, p, li, count, ul_x, ul_y, &ls);
-    float value_max = v3_max(ls.value);
-    float wi_z = lanes_dot(ls.wi, n);
-    float pdf_b = wi_z * VOLCL_INV_PI;
-    V3 f = v3_scale(color, wi_z * VOLCL_INV_PI);
-    /* (the two maxima side by side were packed into a <2 x float>: lanes.h) */
-    nee = nee & (value_max > 0.0f) & (wo_z > 0.0f) & (wi_z > 0.0f) & (lanes_after(v3_max(f), value_max) > 0.0f);
+    V3 c;
+    bool nee = lanes_diffuse_nee(table, rp, tri.color, p, n, wo_z, scatter, (flags & WF_FLAG_DO_NEE) != 0u, &rng,
+                                 &ls, &c);
     V3 origin = lanes_offset_origin(p, tri.mag, ng, ls.wi);
     /* (the ray's direction waits for its origin: the |.| of both, side by side, were packed) */
     float reach = lanes_reach(table, origin, lanes_after3(ls.wi, origin.x), nee ? ls.dist * 0.9999f : -1.0f,
                               VOLCL_WF_HULL_SKIP);
-    float w = (ls.delta | !rp->mis) ? 1.0f : lanes_power_heuristic(ls.pdf, pdf_b);
-    V3 c = v3_scale(v3_mul(f, ls.value), w / ls.pdf);
     L = v3_sel(nee & (reach >= 0.0f), v3(L.x + beta.x * c.x, L.y + beta.y * c.y, L.z + beta.z * c.z), L);
 
-    /* bsdf_sample: the cosine-weighted direction (three numbers drawn, the first unused) */
     bool sampling = scatter & !rp->specular_chains_only;
-    rng32_float_if(&rng, sampling);
-    float u0 = rng32_float_if(&rng, sampling), u1 = rng32_float_if(&rng, sampling);
-    /* the new direction waits for the shadow ray (lanes_after): their set-ups side by side were
-     * packed into <2 x float> vectors */
-    V3 wl = lanes_cosine_hemisphere(lanes_after(u0, reach), u1);
-    float pdf = wl.z > 0.0f ? wl.z * VOLCL_INV_PI : 0.0f;
-    bool cont = sampling & (wo_z > 0.0f) & (pdf > 0.0f);
-    V3 wi = lanes_to_world(wl, frame_s, frame_t, n);
-    V3 beta_s = v3_mul(beta, color);
+    V3 wi;
+    float pdf;
+    bool cont = lanes_diffuse_bounce(&rng, sampling, reach, frame_s, frame_t, n, wo_z, &wi, &pdf);
+    V3 beta_s = v3_mul(beta, tri.color);
 
     /* path_roulette, and the step count */
     bool alive = cont & (v3_max(beta_s) > 0.0f);

@@ -202,7 +202,7 @@ def main(family, size=8, spp=1):
     if engine == "packet":
         # (the simulated device is not a CPU either); two passes in one launch, so that lanes start
         # a second sample while others still finish their first
-        r.wavefront = packets.Packets(r.device, r.features, r.packed)
+        r.wavefront = packets.Packets(r.device, r.features, r.packed, vector_step=True)
         spp = 2
     res = r.render(spp)
     print(f"{family}: {res.device}, {size}x{size}, {spp} spp, invalid {res.invalid}, "

@@ -156,3 +156,44 @@ def test_self_test_renders_through_it(device, monkeypatch):
     monkeypatch.setattr(packets.Packets, "__init__", blind)
     failures = selftest._bare_wall_failures(device)
     assert failures and "packet renderer" in failures[0], failures
+
+
+def _packet_renderer(scene, device, estimator=None, vector_step=True):
+    """A packet Renderer whose kernel takes its diffuse lanes' steps in the vector lanes or not,
+    whichever the device's default (packets.vector_step_pays)."""
+    r = Renderer(scene, device=device, estimator=estimator or Estimator(), seed=5, engine="packet")
+    r.wavefront = packets.Packets(r.device, r.features, r.packed, vector_step=vector_step)
+    return r
+
+
+@pytest.mark.parametrize("name", ["cbox", "surfaces"])
+def test_vector_step_takes_the_diffuse_lanes(device, name):
+    """Lanes whose rays hit a plain diffuse triangle take their step in the vector lanes
+    (kernels/packet_lanes.h), on every runtime, whether or not it is the runtime's default: with it
+    and without it, the megakernel's paths (across the estimator choices and a depth limit, with
+    point and area lights and two-sided walls in "surfaces"), and the same bits."""
+    _cpu(device)
+    for what in sorted(CASES):
+        estimator, defaults = CASES[what]
+        scene = _scene(name, **defaults)
+        mk = Renderer(scene, device=device, estimator=estimator, seed=5, engine="megakernel").render(4)
+        images = []
+        for vector in (True, False):
+            r = _packet_renderer(scene, device, estimator, vector)
+            assert r.wavefront.vector_step == vector, what
+            images.append(r.render(4))
+            _assert_same_paths(mk, images[-1])
+        np.testing.assert_array_equal(images[0].image, images[1].image, err_msg=what)
+
+
+def test_vector_step_only_where_it_can(device):
+    """PoCL takes the vector step by default, Intel's runtime not (its compiler leaves the loop
+    scalar); beside a light the lanes cannot sample (a spherical area light) every lane's step is
+    the scalar one."""
+    _cpu(device)
+    default = Renderer(_scene("cbox", 8), device=device, engine="packet").wavefront.vector_step
+    assert default == ("portable computing language" in device.platform_name.lower())
+    assert _packet_renderer(_scene("cbox", 8), device).wavefront.vector_step
+    lit = cbox_with('<shape type="sphere"><float name="radius" value="0.05"/>'
+                    '<emitter type="area"><rgb name="radiance" value="3"/></emitter></shape>')
+    assert not _packet_renderer(lit, device).wavefront.vector_step

@@ -226,20 +226,49 @@ def surface_lanes(packed, features: dict, params) -> str | None:
     if tiny_lanes(packed, features)[0] == 0:
         return (f"the scene is not small enough to test whole (at most {TINY_LANES} opaque triangles and "
                 f"{TINY_SPHERES} spheres)")
+    why = lanes_lights(packed)
+    if why:
+        return f"the surface stage {why}"
+    if int(params["integrator"]) != layout.INTEGRATORS["path"]:
+        return "the lanes stage is the path integrator's"
+    return None
+
+
+def lanes_lights(packed) -> str | None:
+    """What keeps the diffuse scatter in the lanes (lanes_surface.h lanes_light_sample) from sampling
+    the scene's lights, or None where it samples them all: point lights and area lights on at most
+    TINY_LIGHT_TRIANGLES flat triangles."""
     lights = packed.arrays["lights"]
     area = lights["type"] == layout.LIGHT_TYPES["area"]
     point = lights["type"] == layout.LIGHT_TYPES["point"]
     if not np.all(point | (area & (lights["sphere"] < 0))):
-        return "the surface stage samples point lights and area lights on triangles only"
+        return "samples point lights and area lights on triangles only"
     if len(lights) > TABLE_STRIDE or int(lights["tri_count"][area].sum()) > TINY_LIGHT_TRIANGLES:
-        return f"the surface stage samples at most {TINY_LIGHT_TRIANGLES} light triangles"
+        return f"samples at most {TINY_LIGHT_TRIANGLES} light triangles"
     tri = packed.arrays["triangles"][_light_triangles(packed)[0]]
     _, ok = _library_normals(tri["p0"], tri["p1"], tri["p2"])
     if not np.all(ok & (tri["normals"] < 0)):
-        return "the surface stage samples flat light triangles whose normals' library bits are known"
-    if int(params["integrator"]) != layout.INTEGRATORS["path"]:
-        return "the lanes stage is the path integrator's"
+        return "samples flat light triangles whose normals' library bits are known"
     return None
+
+
+def diffuse_lanes(packed) -> tuple[np.ndarray, np.ndarray, int, int] | None:
+    """The table with which the lanes scatter from the scene's plain diffuse triangles
+    (lanes_surface.h: untextured, flat, not emitting), every used triangle of the scene's leaf
+    packets in packet order, and a slot per triangle row (-1 where the lanes do not scatter from
+    it); with the table's triangle and light triangle counts (VOLCL_WF_TINY, VOLCL_WF_LIGHT_TRIS).
+    None where there is no such triangle or the lanes cannot sample the lights."""
+    leaves = scene_leaves(packed)
+    count = int(_used_lanes(leaves).sum())
+    if count == 0 or lanes_lights(packed):
+        return None
+    corners, codes = _tiny_triangles(packed, count)
+    lanes, _, _ = _lanes_surfaces(packed, corners, codes)
+    if not lanes.any():
+        return None
+    slots = np.full(max(len(packed.arrays["triangles"]), 1), -1, np.int32)
+    slots[codes[lanes]] = np.flatnonzero(lanes)
+    return lanes_table(packed, count, 0, True), slots, count, len(_light_triangles(packed)[0])
 
 
 def _light_triangles(packed):
