@@ -19,9 +19,10 @@
 
 #define PL VOLCL_PACKET_WIDTH
 
-/* The vector step's state of every lane: what it reads (the ray, throughput, depth, generator,
- * hit), and what it leaves (the next ray, the shadow ray). A lane that does not take the step
- * (take 0) runs it on its numbers all the same, its results unused. */
+/* The vector step's state of every lane: what it reads (the ray's direction, throughput, depth,
+ * generator, hit), and what it leaves (the next ray, whose origin ox/oy/oz is only written, and
+ * the shadow ray). A lane that does not take the step (take 0) runs it on its numbers all the
+ * same, its results unused. */
 typedef struct {
     int take[PL], slot[PL], depth[PL], do_nee[PL];
     float ox[PL], oy[PL], oz[PL], dx[PL], dy[PL], dz[PL], bx[PL], by[PL], bz[PL], b1[PL], b2[PL], eta[PL];

@@ -7,8 +7,8 @@ The lanes run the megakernel's path functions (lanes that hit a plain diffuse tr
 step together in the vector lanes where vector_step_pays, kernels/packet_lanes.h, with the same
 arithmetic), so a pixel gets the same samples, added in the same order into the same accumulator
 entry; the queries make the tree's tests with its arithmetic, so the hits have its bits, but for
-which of two primitives at the same distance wins where the tree visits them in another order. Everything built on render_pass (slots, tiles, checkpoints, several
-devices) works unchanged.
+which of two primitives at the same distance wins where the tree visits them in another order.
+Everything built on render_pass (slots, tiles, checkpoints, several devices) works unchanged.
 """
 from __future__ import annotations
 
@@ -29,10 +29,6 @@ MAX_PRIMITIVES = 40
 # packets per work-group: PoCL ran its work-groups of 64 packets at 0.77x the speed of single ones
 # (cbox; each packet's lanes hold a few KB of path state, which a group of them keeps apart)
 GROUP_PACKETS = 1
-# the lanes whose rays hit a plain diffuse triangle take their step in the vector lanes together
-# (kernels/packet_lanes.h) where vector_step_pays(); False: everywhere every lane's step is the
-# megakernel's scalar one
-VECTOR_STEP = True
 # features whose surfaces or media let light through, which a shadow ray as an occlusion query
 # cannot follow, or that the queries do not test
 EXCLUDED = ("MEDIA", "NULL_BSDF", "MASK", "THINDIELECTRIC", "EMISSION_NEE", "INSTANCES", "CYLINDERS", "DIRECT")
@@ -51,10 +47,11 @@ def runs_on(device) -> bool:
 
 
 def vector_step_pays(device) -> bool:
-    """Whether the packet renderer takes its diffuse lanes' steps in the vector lanes on this device:
-    on PoCL (cbox 1.25x the scalar steps' speed, textured_cbox 1.06x), not on Intel's CPU runtime,
-    whose compiler leaves the loop over the lanes scalar (0.68x and 0.78x: README)."""
-    return VECTOR_STEP and "portable computing language" in device.platform_name.lower()
+    """Whether the packet renderer takes its diffuse lanes' steps together in the vector lanes
+    (kernels/packet_lanes.h) on this device by default: on PoCL (cbox 1.24x the scalar steps'
+    speed, textured_cbox 1.12x), not on Intel's CPU runtime, whose compiler leaves the loop over
+    the lanes scalar (0.73x and 0.83x: README). Packets(vector_step=) overrides it."""
+    return "portable computing language" in device.platform_name.lower()
 
 
 def supported(features: dict, packed, params, device) -> str | None:
