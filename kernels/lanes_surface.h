@@ -11,6 +11,11 @@
 typedef struct {
     V3 p0, p1, p2, ng, color;
     float mag, lanes, twosided;
+#if VOLCL_WF_CHECKERS
+    /* (scalars, not arrays: a private array's loads stopped the packet step's loop vectorizer) */
+    float checker, u0, v0, u1, v1, u2, v2, m0, m1, m2, m3, m4, m5;
+    V3 color1;
+#endif
 } LanesTriangle;
 
 /* Triangle `slot` of the table (zeros for -1): a select per triangle and number, which cost less
@@ -20,6 +25,11 @@ inline LanesTriangle lanes_triangle_at(__global const float *table, int slot) {
     LanesTriangle t;
     t.p0 = t.p1 = t.p2 = t.ng = t.color = v3(0.0f, 0.0f, 0.0f);
     t.mag = t.lanes = t.twosided = 0.0f;
+#if VOLCL_WF_CHECKERS
+    t.checker = t.u0 = t.v0 = t.u1 = t.v1 = t.u2 = t.v2 = 0.0f;
+    t.m0 = t.m1 = t.m2 = t.m3 = t.m4 = t.m5 = 0.0f;
+    t.color1 = t.color;
+#endif
 #define TV(c) table[WF_TRI_AT(c, k)]
 #pragma unroll
     for (int k = 0; k < VOLCL_WF_TINY; ++k) {
@@ -32,6 +42,22 @@ inline LanesTriangle lanes_triangle_at(__global const float *table, int slot) {
         t.mag = is_k ? TV(WF_TRI_MAG) : t.mag;
         t.lanes = is_k ? TV(WF_TRI_LANES) : t.lanes;
         t.twosided = is_k ? TV(WF_TRI_TWOSIDED) : t.twosided;
+#if VOLCL_WF_CHECKERS
+        t.checker = is_k ? TV(WF_TRI_CHECKER) : t.checker;
+        t.u0 = is_k ? TV(WF_TRI_UV) : t.u0;
+        t.v0 = is_k ? TV(WF_TRI_UV + 1) : t.v0;
+        t.u1 = is_k ? TV(WF_TRI_UV + 2) : t.u1;
+        t.v1 = is_k ? TV(WF_TRI_UV + 3) : t.v1;
+        t.u2 = is_k ? TV(WF_TRI_UV + 4) : t.u2;
+        t.v2 = is_k ? TV(WF_TRI_UV + 5) : t.v2;
+        t.m0 = is_k ? TV(WF_TRI_TO_UV) : t.m0;
+        t.m1 = is_k ? TV(WF_TRI_TO_UV + 1) : t.m1;
+        t.m2 = is_k ? TV(WF_TRI_TO_UV + 2) : t.m2;
+        t.m3 = is_k ? TV(WF_TRI_TO_UV + 3) : t.m3;
+        t.m4 = is_k ? TV(WF_TRI_TO_UV + 4) : t.m4;
+        t.m5 = is_k ? TV(WF_TRI_TO_UV + 5) : t.m5;
+        t.color1 = v3_sel(is_k, v3(TV(WF_TRI_COLOR1), TV(WF_TRI_COLOR1 + 1), TV(WF_TRI_COLOR1 + 2)), t.color1);
+#endif
     }
 #undef TV
     return t;
@@ -50,8 +76,43 @@ inline LanesTriangle lanes_triangle_gather(__global const float *table, int slot
     t.mag = TV(WF_TRI_MAG);
     t.lanes = TV(WF_TRI_LANES);
     t.twosided = TV(WF_TRI_TWOSIDED);
+#if VOLCL_WF_CHECKERS
+    t.checker = TV(WF_TRI_CHECKER);
+    t.u0 = TV(WF_TRI_UV);
+    t.v0 = TV(WF_TRI_UV + 1);
+    t.u1 = TV(WF_TRI_UV + 2);
+    t.v1 = TV(WF_TRI_UV + 3);
+    t.u2 = TV(WF_TRI_UV + 4);
+    t.v2 = TV(WF_TRI_UV + 5);
+    t.m0 = TV(WF_TRI_TO_UV);
+    t.m1 = TV(WF_TRI_TO_UV + 1);
+    t.m2 = TV(WF_TRI_TO_UV + 2);
+    t.m3 = TV(WF_TRI_TO_UV + 3);
+    t.m4 = TV(WF_TRI_TO_UV + 4);
+    t.m5 = TV(WF_TRI_TO_UV + 5);
+    t.color1 = v3(TV(WF_TRI_COLOR1), TV(WF_TRI_COLOR1 + 1), TV(WF_TRI_COLOR1 + 2));
+#endif
 #undef TV
     return t;
+}
+
+/* The triangle's reflectance at the hit's barycentrics: for a checkerboard of two colours, the
+ * colour texture_leaf (textures.h) picks at texcoords_triangle's uv (texcoords.h), expression
+ * for expression; else its one colour */
+inline V3 lanes_color_at(const LanesTriangle *t, float b1, float b2) {
+#if VOLCL_WF_CHECKERS
+    float b0 = 1.0f - b1 - b2;
+    float u = t->u0 * b0 + t->u1 * b1 + t->u2 * b2;
+    float v = t->v0 * b0 + t->v1 * b1 + t->v2 * b2;
+    float px = t->m0 * u + t->m1 * v + t->m2;
+    float py = t->m3 * u + t->m4 * v + t->m5;
+    bool hx = px - floor(px) > 0.5f, hy = py - floor(py) > 0.5f;
+    return v3_sel((t->checker > 0.0f) & (hx != hy), t->color1, t->color);
+#else
+    (void)b1;
+    (void)b2;
+    return t->color;
+#endif
 }
 
 /* surface_point (surface.h) on a triangle: the barycentric point pulled a hair into it */

@@ -37,6 +37,7 @@ typedef struct {
 inline void packet_lane_step(__global const float *table, __global const RenderParams *rp, PacketLanes *z, int l) {
     bool take = z->take[l] != 0;
     LanesTriangle tri = lanes_triangle_gather(table, z->slot[l]);
+    tri.color = lanes_color_at(&tri, z->b1[l], z->b2[l]);
     V3 d = v3(z->dx[l], z->dy[l], z->dz[l]), beta = v3(z->bx[l], z->by[l], z->bz[l]);
     int depth = z->depth[l];
     bool at_limit = (rp->max_depth >= 0) & (depth + 1 >= rp->max_depth);

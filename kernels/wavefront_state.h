@@ -19,6 +19,9 @@
 #ifndef VOLCL_WF_LIGHT_TRIS
 #define VOLCL_WF_LIGHT_TRIS 0   /* area-light triangles the surface stage samples (wavefront_surface.cl) */
 #endif
+#ifndef VOLCL_WF_CHECKERS
+#define VOLCL_WF_CHECKERS 0     /* 1: some tested triangle's reflectance is a checkerboard (lanes_surface.h) */
+#endif
 #ifndef VOLCL_WF_HULL_SKIP
 #define VOLCL_WF_HULL_SKIP 0    /* tested triangles the surface stage's shadow rays skip (lanes_reach) */
 #endif
@@ -46,14 +49,20 @@
  * xyz, p1 xyz, p2 xyz, the primitive code's int bits; for the surface stage (wavefront_surface.cl)
  * the geometric normal xyz (the library's normalize, computed by the host), the magnitude of the
  * corners, 1 where the stage scatters from the triangle itself (plain diffuse), its reflectance
- * rgb, 1 for a two-sided bsdf */
-#define WF_TRI_COORDS 19
+ * rgb (a checkerboard's first colour), 1 for a two-sided bsdf; with VOLCL_WF_CHECKERS, 1 where
+ * the reflectance is a checkerboard of two colours on the triangle's uvs, its uvs (u0 v0 u1 v1 u2
+ * v2), the texture's to_uv (row-major 2x3) and its second colour rgb */
+#define WF_TRI_COORDS 35
 #define WF_TRI_AT(c, k) (WF_TABLE_ROWS * WF_TABLE_STRIDE + ((c) * VOLCL_WF_TINY + (k)) * 16)
 #define WF_TRI_NG 10
 #define WF_TRI_MAG 13
 #define WF_TRI_LANES 14
 #define WF_TRI_COLOR 15
 #define WF_TRI_TWOSIDED 18
+#define WF_TRI_CHECKER 19
+#define WF_TRI_UV 20
+#define WF_TRI_TO_UV 26
+#define WF_TRI_COLOR1 32
 /* then the spheres (VOLCL_WF_SPHERES): centre xyz, radius, primitive code's int bits */
 #define WF_SPH_COORDS 5
 #define WF_SPH_AT(c, k) (WF_TRI_AT(WF_TRI_COORDS, 0) + ((c) * VOLCL_WF_SPHERES + (k)) * 16)

@@ -36,6 +36,7 @@ __kernel void wavefront_surface(__global float *fs, __global int *is, __global c
     bool hit = lanes_closest_hit(table, o, d, FROW(WF_T_MAX), &hit_t, &hit_b1, &hit_b2, &hit_prim, &slot);
 
     LanesTriangle tri = lanes_triangle_at(table, slot);
+    tri.color = lanes_color_at(&tri, hit_b1, hit_b2);
     bool surf = pending & hit & (tri.lanes > 0.0f);     /* (a sphere's slot is -1: no triangle's numbers) */
     bool at_limit = rp->max_depth >= 0 && depth + 1 >= rp->max_depth;
     bool scatter = surf & !at_limit;    /* a diffuse surface passes nothing at the depth limit */

@@ -144,10 +144,19 @@ def wavefront_medium_stage():
     return WAVEFRONT_MEDIUM(), None, "wavefront"
 
 
+# the same with a checkered floor, which the lanes' vector step evaluates itself (lanes_color_at)
+PACKET_SURFACE = mitsuba('<integrator type="path"><integer name="max_depth" value="4"/></integrator>'
+                         + WAVEFRONT_BODY.format(medium="").replace(
+                             '<rgb name="reflectance" value="0.7, 0.5, 0.3"/>',
+                             '<texture type="checkerboard" name="reflectance"><transform name="to_uv">'
+                             '<scale value="4"/></transform></texture>'))
+
+
 def packet_renderer():
-    """The surface stage's scene through the packet renderer (kernels/packets.cl): its lanes' queries,
-    the shadow rays left for the next step, and lanes that start samples while others finish."""
-    return WAVEFRONT_SURFACE(), None, "packet"
+    """The surface stage's scene with a checkered floor through the packet renderer
+    (kernels/packets.cl): its lanes' queries, the vector step's table reads, the shadow rays left
+    for the next step, and lanes that start samples while others finish."""
+    return PACKET_SURFACE(), None, "packet"
 
 
 def every_feature():

@@ -11,8 +11,8 @@ import pytest
 
 import volcl
 from imagestats import assert_same_image
-from test_wavefront import SURFACES, cbox_with
-from volcl import packets, selftest
+from test_wavefront import CHECKERS, SURFACES, cbox_with
+from volcl import packets, selftest, wavefront
 from volcl.errors import VolclError
 from volcl.estimator import Estimator
 from volcl.renderer import Renderer
@@ -41,8 +41,8 @@ def _scene(name, size=24, **defaults):
     bitmaps, bump and normal maps), and cbox under a constant environment (NEE whose shadow rays
     are traced in the whole scene, beside the area light's in the tree without the box's hull) and
     with hidden emitters (camera rays pass through the light: no roulette there)."""
-    if name == "surfaces":
-        return volcl.load_string(SURFACES, **defaults)
+    if name in ("surfaces", "checkers"):
+        return volcl.load_string(SURFACES if name == "surfaces" else CHECKERS, **defaults)
     if name in ("cbox_sky", "cbox_hidden"):
         text = (SCENES / "cbox.xml").read_text()
         if name == "cbox_sky":
@@ -166,13 +166,17 @@ def _packet_renderer(scene, device, estimator=None, vector_step=True):
     return r
 
 
-@pytest.mark.parametrize("name", ["cbox", "surfaces"])
+@pytest.mark.parametrize("name", ["cbox", "surfaces", "checkers", "textured_cbox"])
 def test_vector_step_takes_the_diffuse_lanes(device, name):
-    """Lanes whose rays hit a plain diffuse triangle take their step in the vector lanes
-    (kernels/packet_lanes.h), on every runtime, whether or not it is the runtime's default: with it
-    and without it, the megakernel's paths (across the estimator choices and a depth limit, with
-    point and area lights and two-sided walls in "surfaces"), and the same bits."""
+    """Lanes whose rays hit a plain diffuse triangle, or a diffuse one whose reflectance is a
+    checkerboard of two colours, take their step in the vector lanes (kernels/packet_lanes.h), on
+    every runtime, whether or not it is the runtime's default: with it and without it, the
+    megakernel's paths (across the estimator choices and a depth limit, with point and area lights
+    and two-sided walls in "surfaces", those walls checkered in "checkers", textured_cbox's
+    checkered wall beside its rough, bitmap-textured and bump-mapped bsdfs), and the same bits."""
     _cpu(device)
+    lanes = wavefront.diffuse_lanes(Renderer(_scene(name), device=device, engine="megakernel").packed)
+    assert lanes is not None and lanes[4] == (name in ("checkers", "textured_cbox")), name
     for what in sorted(CASES):
         estimator, defaults = CASES[what]
         scene = _scene(name, **defaults)

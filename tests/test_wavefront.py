@@ -259,6 +259,15 @@ SURFACES = """<scene version="3.0.0">
     </shape>
 </scene>"""
 
+# the same box with a checkerboard of two colours for its reflectance, tilted on its uv: the lanes'
+# texcoords and checkerboard (lanes_surface.h lanes_color_at) on two-sided walls
+CHECKERS = SURFACES.replace(
+    '<rgb name="reflectance" value="0.7, 0.6, 0.5"/>',
+    '<texture type="checkerboard" name="reflectance"><rgb name="color0" value="0.7, 0.6, 0.5"/>'
+    '<rgb name="color1" value="0.2, 0.4, 0.6"/>'
+    '<transform name="to_uv"><rotate z="1" angle="20"/><scale x="3" y="5"/><translate x="0.1"/></transform></texture>')
+assert CHECKERS != SURFACES
+
 SURFACE_CASES = {
     "default": (Estimator(), {}),
     "MIS off": (Estimator(mis=False), {}),
@@ -270,10 +279,10 @@ SURFACE_CASES = {
 def _surface_scene(name, **defaults):
     if name == "cbox":
         return volcl.load_file(SCENES / "cbox.xml", width=32, height=32, **defaults)
-    return volcl.load_string(SURFACES, **defaults)
+    return volcl.load_string(CHECKERS if name == "checkers" else SURFACES, **defaults)
 
 
-@pytest.mark.parametrize("name", ["cbox", "surfaces"])
+@pytest.mark.parametrize("name", ["cbox", "surfaces", "checkers"])
 @pytest.mark.parametrize("what", sorted(SURFACE_CASES))
 def test_surface_stage_same_paths_as_megakernel(device, name, what):
     """A scene without media tested whole: the surface stage scatters from its diffuse triangles
@@ -287,6 +296,7 @@ def test_surface_stage_same_paths_as_megakernel(device, name, what):
     scene = _surface_scene(name, **defaults)
     r = Renderer(scene, device=device, estimator=estimator, seed=3, engine="wavefront")
     assert r.wavefront.surface and r.wavefront.tiny > 0
+    assert ("-DVOLCL_WF_CHECKERS=1" in r.wavefront.sources[1][1]) == (name == "checkers")
     mk = Renderer(scene, device=device, estimator=estimator, seed=3, engine="megakernel").render(8)
     wf = r.render(8)
     assert mk.image.mean() > 0.01, "a black image compares nothing"

@@ -84,8 +84,9 @@ class Packets:
             vector_step = vector_step_pays(device)
         lanes = wavefront.diffuse_lanes(packed) if vector_step else None
         if lanes is not None:
-            table, slots, tris, light_tris = lanes
-            extra += ("-DVOLCL_PACKET_LANES=1", f"-DVOLCL_WF_TINY={tris}", f"-DVOLCL_WF_LIGHT_TRIS={light_tris}")
+            table, slots, tris, light_tris, checkers = lanes
+            extra += ("-DVOLCL_PACKET_LANES=1", f"-DVOLCL_WF_TINY={tris}", f"-DVOLCL_WF_LIGHT_TRIS={light_tris}",
+                      f"-DVOLCL_WF_CHECKERS={checkers}")
         else:
             table, slots = np.zeros(1, np.float32), np.full(1, -1, np.int32)
         self.vector_step = lanes is not None

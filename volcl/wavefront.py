@@ -52,7 +52,7 @@ TABLE_ROWS = 18
 T_LIGHT_POS, T_LIGHT_VALUE, T_SIGMA_T, T_ALBEDO, T_G, T_ISO, T_LANES, T_POINT, T_AREA, T_SEALED = (
     0, 3, 6, 9, 12, 13, 14, 15, 16, 17)
 TRI_SPACING = 16        # words between a tiny scene's triangle numbers (wavefront_state.h WF_TRI_AT)
-TRI_COORDS, SPHERE_COORDS, LIGHT_TRI_COORDS = 19, 5, 16     # numbers per triangle, sphere, light triangle
+TRI_COORDS, SPHERE_COORDS, LIGHT_TRI_COORDS = 35, 5, 16     # numbers per triangle, sphere, light triangle
 # the most triangles and spheres of a scene the lanes stage traces itself, testing every one for
 # every ray (kernels/lanes_triangles.h), and light triangles the surface stage samples
 TINY_LANES = 16
@@ -205,16 +205,31 @@ def _tiny_triangles(packed, count):
 
 def _lanes_surfaces(packed, corners, codes):
     """Which tested triangles the surface stage scatters from itself (wavefront_surface.cl): plain
-    diffuse, untextured, flat, not emitting, with a normal whose library bits are known; and their
-    normals and bsdf records."""
+    diffuse, untextured or with a checkerboard of two colours on the mesh's uv, flat, not
+    emitting, with a normal whose library bits are known; their normals and bsdf records, and which
+    of them are checkerboards (_checkers)."""
     tris, shapes, bsdfs = packed.arrays["triangles"], packed.arrays["shapes"], packed.arrays["bsdfs"]
     shape = shapes[tris["shape"][codes]]
     bsdf = bsdfs[shape["bsdf"]]
     ng, ok = _library_normals(corners[:, 0], corners[:, 1], corners[:, 2])
-    lanes = (ok & (bsdf["type"] == layout.BSDF_TYPES["diffuse"]) & (bsdf["color_tex"] < 0)
-             & (bsdf["flags"] & (FLAG_UV | FLAG_UV_FRAME | FLAG_PASSES) == 0)
+    checker = _checkers(packed, codes, shape, bsdf)
+    plain = (bsdf["color_tex"] < 0) & (bsdf["flags"] & FLAG_UV == 0)
+    lanes = (ok & (bsdf["type"] == layout.BSDF_TYPES["diffuse"]) & (plain | checker)
+             & (bsdf["flags"] & (FLAG_UV_FRAME | FLAG_PASSES) == 0)
              & (shape["light"] < 0) & (tris["normals"][codes] < 0))
-    return lanes, ng, bsdf
+    return lanes, ng, bsdf, checker & lanes
+
+
+def _checkers(packed, codes, shape, bsdf):
+    """Which tested triangles' reflectance is a checkerboard of two colours (no nested textures)
+    on their mesh's own uv, which the lanes evaluate as texcoords_triangle and texture_leaf do."""
+    textures = packed.arrays["textures"]
+    index = bsdf["color_tex"]
+    if len(textures) == 0 or not np.any(index >= 0):
+        return np.zeros(len(codes), bool)
+    t = textures[np.maximum(index, 0)]
+    return ((index >= 0) & (t["type"] == layout.TEXTURE_TYPES["checkerboard"]) & (t["child0"] < 0)
+            & (t["child1"] < 0) & (shape["uv_map"] < 0) & (packed.arrays["triangles"]["uvs"][codes] >= 0))
 
 
 def surface_lanes(packed, features: dict, params) -> str | None:
@@ -252,23 +267,25 @@ def lanes_lights(packed) -> str | None:
     return None
 
 
-def diffuse_lanes(packed) -> tuple[np.ndarray, np.ndarray, int, int] | None:
+def diffuse_lanes(packed) -> tuple[np.ndarray, np.ndarray, int, int, int] | None:
     """The table with which the lanes scatter from the scene's plain diffuse triangles
-    (lanes_surface.h: untextured, flat, not emitting), every used triangle of the scene's leaf
-    packets in packet order, and a slot per triangle row (-1 where the lanes do not scatter from
-    it); with the table's triangle and light triangle counts (VOLCL_WF_TINY, VOLCL_WF_LIGHT_TRIS).
-    None where there is no such triangle or the lanes cannot sample the lights."""
+    (lanes_surface.h: untextured or checkered with two colours, flat, not emitting), every used
+    triangle of the scene's leaf packets in packet order, and a slot per triangle row (-1 where the
+    lanes do not scatter from it); with the table's triangle and light triangle counts
+    (VOLCL_WF_TINY, VOLCL_WF_LIGHT_TRIS) and 1 where some of them are checkered
+    (VOLCL_WF_CHECKERS), else 0. None where there is no such triangle or the lanes cannot sample
+    the lights."""
     leaves = scene_leaves(packed)
     count = int(_used_lanes(leaves).sum())
     if count == 0 or lanes_lights(packed):
         return None
     corners, codes = _tiny_triangles(packed, count)
-    lanes, _, _ = _lanes_surfaces(packed, corners, codes)
+    lanes, _, _, checker = _lanes_surfaces(packed, corners, codes)
     if not lanes.any():
         return None
     slots = np.full(max(len(packed.arrays["triangles"]), 1), -1, np.int32)
     slots[codes[lanes]] = np.flatnonzero(lanes)
-    return lanes_table(packed, count, 0, True), slots, count, len(_light_triangles(packed)[0])
+    return lanes_table(packed, count, 0, True), slots, count, len(_light_triangles(packed)[0]), int(checker.any())
 
 
 def _light_triangles(packed):
@@ -301,12 +318,22 @@ def lanes_table(packed, tiny: int = 0, spheres: int = 0, surface: bool = False) 
         tri[:9, :, 0] = corners.reshape(tiny, 9).T
         tri[9, :, 0] = codes.astype(np.int32).view(np.float32)
         if surface:
-            lanes, ng, bsdf = _lanes_surfaces(packed, corners, codes)
+            lanes, ng, bsdf, checker = _lanes_surfaces(packed, corners, codes)
             tri[10:13, :, 0] = ng.T
             tri[13, :, 0] = np.abs(corners).max(axis=(1, 2))
             tri[14, :, 0] = lanes
             tri[15:18, :, 0] = bsdf["color"].T
             tri[18, :, 0] = bsdf["twosided"] != 0
+            if checker.any():
+                # a checkerboard's first colour in the reflectance's place, then its flag, the
+                # triangle's uvs, the texture's to_uv and second colour
+                tex = packed.arrays["textures"][np.maximum(bsdf["color_tex"], 0)]
+                uvs = packed.arrays["tri_uvs"]["uv"][np.maximum(packed.arrays["triangles"]["uvs"][codes], 0)]
+                tri[15:18, checker, 0] = tex["color0"][checker].T
+                tri[19, :, 0] = checker
+                tri[20:26, checker, 0] = uvs[checker].T
+                tri[26:32, checker, 0] = tex["to_uv"][checker].T
+                tri[32:35, checker, 0] = tex["color1"][checker].T
     if spheres:
         leaves = scene_leaves(packed)
         code = leaves["prim"][leaves["prim"] < 0]
@@ -377,9 +404,12 @@ class Wavefront:
         self.surface = not features.get("MEDIA")
         self.tiny, ends, spheres = tiny_lanes(packed, features) if tiny or self.surface else (0, 0, 0)
         light_tris = len(_light_triangles(packed)[0]) if self.surface else 0
+        checkers = int(_lanes_surfaces(packed, *_tiny_triangles(packed, self.tiny))[3].any()) \
+            if self.surface and self.tiny else 0
         skip = hull_skip(packed, self.tiny) if self.surface and self.tiny else 0
         extra = (f"-DVOLCL_WF_TINY={self.tiny}", f"-DVOLCL_WF_TINY_ENDS={ends}", f"-DVOLCL_WF_SPHERES={spheres}",
-                 f"-DVOLCL_WF_LIGHT_TRIS={light_tris}", f"-DVOLCL_WF_HULL_SKIP={skip}") if self.tiny else ()
+                 f"-DVOLCL_WF_LIGHT_TRIS={light_tris}", f"-DVOLCL_WF_HULL_SKIP={skip}",
+                 f"-DVOLCL_WF_CHECKERS={checkers}") if self.tiny else ()
         program = device.program(features, SCALAR_FILE, extra)
         self.scalar = cl.Kernel(program, "wavefront_scalar")
         self.add = cl.Kernel(program, "wavefront_add")
