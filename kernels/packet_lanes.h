@@ -1,5 +1,6 @@
 /* The packet renderer's vector step (packets.cl): the lanes of a packet whose rays hit a plain
- * diffuse triangle (untextured, flat, not emitting: volcl/packets.py marks them) take their whole
+ * diffuse triangle (untextured or checkered with two colours, flat, not emitting:
+ * volcl.wavefront.diffuse_lanes marks them) take their whole
  * step there in one loop over the lanes that LLVM's loop vectorizer runs in the SIMD lanes, as the
  * wavefront's surface stage takes it (wavefront_surface.cl, with its routines, lanes_surface.h):
  * path_surface_event at a diffuse vertex and path_roulette, draw for draw, the shadow ray left to
