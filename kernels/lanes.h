@@ -23,7 +23,10 @@
  *    any two isomorphic computations side by side that it finds worth it: two shadow rays' tests
  *    and transmittances, their conditions' compares, two fabs, and in scenes of more than four
  *    triangles the sheared corner coordinates of a triangle test. One of the two is made to
- *    depend on the other (lanes_after, lanes_wait), or written another way.
+ *    depend on the other (lanes_after, lanes_wait), or written another way. Which pairs it packs
+ *    depends on the target's cost model: on AVX2 it packed dozens more all over the medium stage,
+ *    which PoCL therefore runs as an explicit loop over its paths, vectorized before the SLP
+ *    vectorizer runs (wavefront_lanes.cl VOLCL_WF_LOOP).
  *  - a select per candidate over a dozen table entries cost less than a gather per number on PoCL
  *    (wavefront_surface.cl's hit triangle).
  */

@@ -16,6 +16,12 @@
  * tree's leaf packets end and where the shadow tree's (RenderParams.shadow_root: the scene without
  * the faces of its convex hull, volcl.hull) end. */
 #define VOLCL_DEFER_SHADOWS 1
+/* Two warnings each first build printed, about nothing wrong: without AVX-512, that a float16
+ * argument's calling convention differs (every function is inlined: no call crosses a boundary);
+ * and that the front end's optimizer left the vector step's loop to the work-group compiler, which
+ * vectorizes it */
+#pragma clang diagnostic ignored "-Wpsabi"
+#pragma clang diagnostic ignored "-Wpass-failed"
 #include "renderer.h"
 #include "packet_queries.h"
 #ifndef VOLCL_PACKET_LANES

@@ -60,15 +60,10 @@ inline float lanes_distance_pdf(V3 sigma_t, V3 beta, V3 tr) {
 #endif
 }
 
-#ifdef __OPTIMIZE__
-#pragma clang attribute pop
-#endif
-
-/* No bounds test: the host launches whole work-groups over the wave (a store under a condition would
- * stop the vectorizer); paths past the wave's end are never alive. */
-__kernel void wavefront_medium(__global float *fs, __global int *is, __global const float *table,
-                               __global const RenderParams *rp) {
-    int i = (int)get_global_id(0);
+/* Path i's medium step. No bounds test: the host launches whole work-groups over the wave (a store
+ * under a condition would stop the vectorizer); paths past the wave's end are never alive. */
+inline void wf_medium_step(__global float *fs, __global int *is, __global const float *table,
+                           __global const RenderParams *rp, int i) {
     int event = IROW(WF_EVENT), mi = IROW(WF_MEDIUM), depth = IROW(WF_DEPTH);
     uint flags = (uint)IROW(WF_FLAGS);
     bool pending = lanes_pending(event);
@@ -265,4 +260,33 @@ __kernel void wavefront_medium(__global float *fs, __global int *is, __global co
     frow3_put(fs, WF_SHADOW(1) + WF_SHADOW_D, i, v3_sel(nee_later, d, wl));
     FROW(WF_SHADOW(1) + WF_SHADOW_T) = dist_l * 0.9999f;
     frow3_put(fs, WF_SHADOW(1) + WF_SHADOW_C, i, v3_sel(nee_later, v3(u_pick, ul_x, ul_y), c_l));
+}
+
+#ifdef __OPTIMIZE__
+#pragma clang attribute pop
+#endif
+
+/* VOLCL_WF_LOOP paths per work-item, in a loop that LLVM's loop vectorizer runs in the SIMD lanes
+ * (volcl.wavefront.lanes_loop: PoCL), or 0: one path per work-item, for the runtime's own
+ * vectorizer across work-items. PoCL vectorizes its loop over a work-group's items only after the
+ * SLP vectorizer has run on the one work-item's code, and on AVX2 that packed pairs of the
+ * stage's scalars into <2 x float> vectors all over it, which stopped the loop vectorizer (README,
+ * "The medium stage as a loop of its own"); an explicit loop is vectorized before the SLP
+ * vectorizer runs. */
+#ifndef VOLCL_WF_LOOP
+#define VOLCL_WF_LOOP 0
+#endif
+
+/* (the front end's optimizer leaves the loop to the work-group compiler, which vectorizes it, and
+ * says so in a warning every first build printed) */
+#pragma clang diagnostic ignored "-Wpass-failed"
+__kernel void wavefront_medium(__global float *fs, __global int *is, __global const float *table,
+                               __global const RenderParams *rp) {
+#if VOLCL_WF_LOOP
+    int base = (int)get_global_id(0) * VOLCL_WF_LOOP;
+#pragma clang loop unroll(disable) vectorize(assume_safety) vectorize_width(VOLCL_WF_LOOP) interleave_count(1)
+    for (int l = 0; l < VOLCL_WF_LOOP; ++l) wf_medium_step(fs, is, table, rp, base + l);
+#else
+    wf_medium_step(fs, is, table, rp, (int)get_global_id(0));
+#endif
 }

@@ -144,6 +144,11 @@ def wavefront_medium_stage():
     return WAVEFRONT_MEDIUM(), None, "wavefront"
 
 
+def wavefront_medium_loop():
+    """The medium stage as PoCL builds it: its paths in a loop of each work-item (VOLCL_WF_LOOP)."""
+    return WAVEFRONT_MEDIUM(), None, "wavefront loop"
+
+
 # the same with a checkered floor, which the lanes' vector step evaluates itself (lanes_color_at)
 PACKET_SURFACE = mitsuba('<integrator type="path"><integer name="max_depth" value="4"/></integrator>'
                          + WAVEFRONT_BODY.format(medium="").replace(
@@ -190,6 +195,7 @@ FAMILIES = {
     "every_feature": every_feature,
     "wavefront_surface_stage": wavefront_surface_stage,
     "wavefront_medium_stage": wavefront_medium_stage,
+    "wavefront_medium_loop": wavefront_medium_loop,
     "packet_renderer": packet_renderer,
 }
 
@@ -201,13 +207,14 @@ def main(family, size=8, spp=1):
     devices = devmod.list_devices()
     assert len(devices) == 1, f"expected only the simulated device, found {[d.name for d in devices]}"
     r = Renderer(sc, device=devices[0], features=features, seed=5, engine="megakernel")
-    if engine == "wavefront":
+    if engine.startswith("wavefront"):
         # (the simulated device is not a CPU, which the wavefront renderer asks for, but runs it);
         # a look at the paths' flags after every step, not every 8: each launch takes the simulator
         # about a second, and the steps past the last path's end took most of the time (50 s
         # against 12 s for the surface stage's family)
         wavefront.CHECK_EVERY = 1
-        r.wavefront = wavefront.Wavefront(r.device, r.features, r.packed, r.group_items)
+        loop = wavefront.LOOP_PATHS if engine.endswith("loop") else 0
+        r.wavefront = wavefront.Wavefront(r.device, r.features, r.packed, r.group_items, loop=loop)
     if engine == "packet":
         # (the simulated device is not a CPU either); two passes in one launch, so that lanes start
         # a second sample while others still finish their first

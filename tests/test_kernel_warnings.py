@@ -4,8 +4,10 @@ clang's static analyzer, for the program with every feature compiled in; and eve
 unused-parameter and unused-variable family (code a specialization compiles out leaves its
 arguments unused, by design). The wavefront renderer's entry points (wavefront.cl, wavefront_lanes.cl,
 wavefront_surface.cl) are checked with every feature compiled in, with and without the lanes stage's
-whole-scene tests, and the packet renderer's (packets.cl) at both packet widths with every feature it
-takes, with and without its vector step for diffuse lanes (packet_lanes.h). Skipped, with the reason, where clang is absent (`./quickstart test` installs it)."""
+whole-scene tests, the medium stage also with its paths in a loop of each work-item (PoCL's build),
+and the packet renderer's (packets.cl) at both packet widths with every feature it takes, with and
+without its vector step for diffuse lanes (packet_lanes.h). Skipped, with the reason, where clang is
+absent (`./quickstart test` installs it)."""
 import shutil
 import subprocess
 
@@ -39,15 +41,17 @@ def _specializations():
 # 6 triangles in packets of 4 and 2, 2 spheres, 3 light triangles)
 TINY = ["-DVOLCL_WF_TINY=6", "-DVOLCL_WF_TINY_ENDS=40", "-DVOLCL_WF_SPHERES=2", "-DVOLCL_WF_LIGHT_TRIS=3"]
 ENTRY_POINTS = ["render.cl", "wavefront.cl", "wavefront_lanes.cl", "wavefront.cl tiny", "wavefront_lanes.cl tiny",
-                "wavefront_surface.cl tiny", "packets.cl 16", "packets.cl 8", "packets.cl 16 lanes",
-                "packets.cl 8 lanes"]
+                "wavefront_lanes.cl loop", "wavefront_lanes.cl tiny loop", "wavefront_surface.cl tiny",
+                "packets.cl 16", "packets.cl 8", "packets.cl 16 lanes", "packets.cl 8 lanes"]
+# the medium stage with its paths in a loop of each work-item, as PoCL builds it (wavefront.lanes_loop)
+LOOP = ["-DVOLCL_WF_LOOP=16"]
 # the packet renderer's vector step, as built for a scene of 6 tested triangles and 3 light triangles
 PACKET_LANES = ["-DVOLCL_PACKET_LANES=1", "-DVOLCL_WF_TINY=6", "-DVOLCL_WF_LIGHT_TRIS=3"]
 
 
 def _compile(args, features, entry="render.cl"):
     name, _, variant = entry.partition(" ")
-    extra = TINY if variant == "tiny" else []
+    extra = (TINY if variant.startswith("tiny") else []) + (LOOP if variant.endswith("loop") else [])
     if name == packets.SOURCE_FILE:     # the features it takes (the others are an #error there)
         features = {k: v and k not in packets.EXCLUDED for k, v in features.items()}
         width, _, lanes = variant.partition(" ")

@@ -83,6 +83,37 @@ def test_same_paths_as_megakernel(device, what):
     np.testing.assert_allclose(wf.image.mean(), mk.image.mean(), rtol=1e-3)
 
 
+@pytest.mark.parametrize("loop", [0, wavefront.LOOP_PATHS, 8])
+@pytest.mark.parametrize("name", ["point_in_fog", "chromatic"])
+def test_medium_stage_loop_same_paths(device, name, loop):
+    """The medium stage with one path per work-item (0) and with its paths in a loop of each
+    work-item (VOLCL_WF_LOOP, PoCL's default), on every runtime: the megakernel's paths, and
+    the launch covers every path (a wave of 4,096 paths a loop of 8 or 16 divides)."""
+    if device.kind != "cpu":
+        pytest.skip("the wavefront renderer is for CPU devices")
+    scene = _scene(name)
+    mk = Renderer(scene, device=device, seed=3, engine="megakernel").render(8)
+    r = Renderer(scene, device=device, seed=3, engine="wavefront")
+    r.wavefront = wavefront.Wavefront(r.device, r.features, r.packed, r.group_items, loop=loop)
+    assert r.wavefront.loop == loop
+    wf = r.render(8)
+    assert wf.invalid == 0 and mk.invalid == 0
+    off = _channels_off(wf.image, mk.image)
+    assert off < 0.01, f"loop {loop}: {off:.3%} of pixel channels differ by more than 1e-3"
+    np.testing.assert_allclose(wf.image.mean(), mk.image.mean(), rtol=1e-3)
+
+
+def test_medium_stage_loop_where_pocl():
+    """PoCL's medium stage loops over its paths (its work-item vectorizer failed on AVX2); other
+    runtimes keep one path per work-item for their own vectorizers."""
+    class Dev:
+        def __init__(self, platform_name):
+            self.platform_name = platform_name
+    assert wavefront.lanes_loop(Dev("Portable Computing Language")) == wavefront.LOOP_PATHS
+    assert wavefront.lanes_loop(Dev("Intel(R) OpenCL")) == 0
+    assert wavefront.lanes_loop(Dev("Oclgrind")) == 0
+
+
 @pytest.mark.parametrize("name", ["point_in_fog", "chromatic"])
 def test_same_image_as_megakernel(device, name):
     """Two seeds: the same image within the standard errors, over 4 x 4 blocks; and one seed, the

@@ -69,6 +69,9 @@ CHECK_EVERY = 8
 # 65536 4.28 s
 PATHS = 4096
 
+# the medium stage's paths per work-item on PoCL (lanes_loop)
+LOOP_PATHS = 16
+
 LANES_FILE = "wavefront_lanes.cl"
 SURFACE_FILE = "wavefront_surface.cl"
 SCALAR_FILE = "wavefront.cl"
@@ -138,6 +141,14 @@ def start(engine: str, features: dict, packed, params, device):
             return wf, wf.sources
     device.program(features)
     return None, [(ENTRY_FILE, ())]
+
+
+def lanes_loop(device) -> int:
+    """Paths per work-item of the medium stage (kernels/wavefront_lanes.cl VOLCL_WF_LOOP), in a loop
+    LLVM's loop vectorizer runs in the SIMD lanes: LOOP_PATHS on PoCL, whose vectorizer across
+    work-items the SLP vectorizer's packing stopped on AVX2 (README, "The medium stage as a loop
+    of its own"); 0 (one path per work-item) on other runtimes."""
+    return LOOP_PATHS if "portable computing language" in device.platform_name.lower() else 0
 
 
 def surface_stage_pays(device) -> bool:
@@ -398,7 +409,8 @@ class Wavefront:
     """The stage kernels of one Renderer's feature set, and the loop that runs them."""
 
     def __init__(self, device, features: dict, packed, group_items: int | None = None, paths: int = PATHS,
-                 tiny: bool = True):
+                 tiny: bool = True, loop: int | None = None):
+        """loop: the medium stage's paths per work-item (default lanes_loop(device); 0: one)."""
         self.device = device
         # a scene without media is the surface stage's (supported() has checked that it can take it)
         self.surface = not features.get("MEDIA")
@@ -415,12 +427,16 @@ class Wavefront:
         self.add = cl.Kernel(program, "wavefront_add")
         self.begin = cl.Kernel(program, "wavefront_begin")
         lanes_file, kernel = (SURFACE_FILE, "wavefront_surface") if self.surface else (LANES_FILE, "wavefront_medium")
-        self.lanes = cl.Kernel(device.program(features, lanes_file, extra), kernel)
-        self.sources = [(SCALAR_FILE, extra), (lanes_file, extra)]     # its programs (source, extra options)
+        self.loop = 0 if self.surface else (lanes_loop(device) if loop is None else int(loop))
+        lanes_extra = extra + (f"-DVOLCL_WF_LOOP={self.loop}",) if self.loop else extra
+        self.lanes = cl.Kernel(device.program(features, lanes_file, lanes_extra), kernel)
+        self.sources = [(SCALAR_FILE, extra), (lanes_file, lanes_extra)]   # its programs (source, extra options)
         if group_items is None:
             group_items = devmod.group_items([self.scalar, self.add, self.begin, self.lanes], device.device)
         self.group_items = group_items
-        self.paths = -(-min(paths, STRIDE - 16) // group_items) * group_items
+        # waves in whole work-groups of every kernel, the medium stage's loops included
+        self.unit = unit = max(group_items, self.loop)
+        self.paths = -(-min(paths, STRIDE - 16) // unit) * unit
         self.table = cl.Buffer(device.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
                                hostbuf=lanes_table(packed, self.tiny, spheres, self.surface))
         self.results = None
@@ -440,8 +456,9 @@ class Wavefront:
         jobs = items * passes
         if self.results is None or self.results.size < 16 * jobs:
             self.results = cl.Buffer(self.device.ctx, cl.mem_flags.READ_WRITE, 16 * jobs)
-        n = min(self.paths, -(-jobs // self.group_items) * self.group_items)
+        n = min(self.paths, -(-jobs // self.unit) * self.unit)
         size, local = (n,), (self.group_items,)
+        lanes_size = ((n // self.loop,), (max(self.group_items // self.loop, 1),)) if self.loop else (size, local)
         # every path alive, about to take a job (a kernel writes the rows: Oclgrind 21.10 does not
         # count a host write at an offset into a buffer as initializing it)
         self.begin(queue, size, local, state.is_, np.int32(n))
@@ -457,7 +474,7 @@ class Wavefront:
         while True:
             for _ in range(CHECK_EVERY):
                 cl.enqueue_nd_range_kernel(queue, self.scalar, size, local)
-                cl.enqueue_nd_range_kernel(queue, self.lanes, size, local)
+                cl.enqueue_nd_range_kernel(queue, self.lanes, *lanes_size)
                 self.steps += 1
             host = flags[len(reads) % 2]
             reads.append((cl.enqueue_copy(queue, host, state.is_, src_offset=4 * ROW_FLAGS * STRIDE,
