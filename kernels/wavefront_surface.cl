@@ -2,8 +2,8 @@
  * enough to test whole (volcl/wavefront.py surface_lanes), written for the SIMD lanes (lanes.h).
  * For every path whose ray the scalar stage (wavefront.cl) left, it finds the closest hit
  * (lanes_triangles.h); where that is a plain diffuse triangle (the table marks them: untextured
- * or checkered with two colours, flat, not emitting) it takes the whole step there, as path_surface_event and path_roulette do it
- * (integrator.h), draw for draw: next-event estimation towards a point light or an area light on
+ * or checkered with two colours, flat, not emitting) it takes the whole step there, as
+ * path_surface_event and path_roulette do it (integrator.h), draw for draw: next-event estimation towards a point light or an area light on
  * triangles with its shadow ray, the cosine-weighted new direction, the roulette; and marks the
  * path WF_EV_NEXT, which the scalar stage leaves alone. Every other hit (spheres, other bsdfs,
  * emitters) and every miss goes to the scalar stage as PATH_SURFACE, with the hit's rows.

@@ -194,6 +194,11 @@ def check(dev: Device) -> tuple[bool, str]:
     return dev._trusted
 
 
+def is_pocl(dev) -> bool:
+    """Whether the device is PoCL's (anything with a platform_name)."""
+    return "portable computing language" in dev.platform_name.lower()
+
+
 def _preference(dev: Device) -> tuple:
     """Default order: GPUs, then PoCL's CPU device, then other devices in platform order. On the
     AVX2 hosts measured PoCL rendered as fast as Intel's runtime or faster on every scene (README,
@@ -201,7 +206,7 @@ def _preference(dev: Device) -> tuple:
     second, but its first build of a feature set takes seconds, and the tests' default device is
     PoCL. The loader's platform order follows the order of files in a folder, which is no order at
     all."""
-    return (dev.kind != "gpu", "portable computing language" not in dev.platform_name.lower())
+    return (dev.kind != "gpu", not is_pocl(dev))
 
 
 def _match(devs: list[Device], sel: str) -> list[Device]:

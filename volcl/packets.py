@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import device as devmod
 from . import layout, wavefront
 from .opencl import cl
 
@@ -51,7 +52,7 @@ def vector_step_pays(device) -> bool:
     (kernels/packet_lanes.h) on this device by default: on PoCL (cbox 1.24x the scalar steps'
     speed, textured_cbox 1.12x), not on Intel's CPU runtime, whose compiler leaves the loop over
     the lanes scalar (0.73x and 0.83x: README). Packets(vector_step=) overrides it."""
-    return "portable computing language" in device.platform_name.lower()
+    return devmod.is_pocl(device)
 
 
 def supported(features: dict, packed, params, device) -> str | None:

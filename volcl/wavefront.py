@@ -148,7 +148,7 @@ def lanes_loop(device) -> int:
     LLVM's loop vectorizer runs in the SIMD lanes: LOOP_PATHS on PoCL, whose vectorizer across
     work-items the SLP vectorizer's packing stopped on AVX2 (README, "The medium stage as a loop
     of its own"); 0 (one path per work-item) on other runtimes."""
-    return LOOP_PATHS if "portable computing language" in device.platform_name.lower() else 0
+    return LOOP_PATHS if devmod.is_pocl(device) else 0
 
 
 def surface_stage_pays(device) -> bool:
