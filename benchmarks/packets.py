@@ -3,11 +3,12 @@ each OpenCL implementation present (or --device), render alone, interleaved.
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/packets.py [--scenes scenes/cbox.xml scenes/textured_cbox.xml]
         [--size 128x128] [--spp 64] [--rounds 3] [--icospheres 0 1 2] [--widths 8 16] [--groups 1 64]
-        [--vector-step on off]
+        [--vector-step on off] [--rough-step on off]
 
 Prints, in Markdown, for each scene and implementation: M samples per second (wall) of the
 megakernel and of the packet renderer at each packet width, packets per work-group and with or
-without its vector step for diffuse lanes (kernels/packet_lanes.h), Renderer.render
+without its vector step for diffuse lanes (kernels/packet_lanes.h), with or without the rough
+step for rough plastic lanes (kernels/lanes_rough.h; only where the vector step is on), Renderer.render
 after a 1-spp warm-up, best of --rounds, all of them interleaved in every round; the ratio to the
 megakernel (above 1: faster); and whether the image has the megakernel's bits with the same seed.
 --icospheres adds variants of the first scene with a diffuse icosphere of that many subdivisions
@@ -58,6 +59,8 @@ def main(argv=None):
     p.add_argument("--widths", nargs="+", type=int, default=[16])
     p.add_argument("--groups", nargs="+", type=int, default=[1])
     p.add_argument("--vector-step", nargs="+", choices=["on", "off"], default=["on"])
+    p.add_argument("--rough-step", nargs="+", choices=["on", "off", "default"], default=["default"],
+                   help="default: whichever the device's (packets.rough_step_pays)")
     args = p.parse_args(argv)
     import volcl
     from volcl import device as devmod, packets
@@ -66,10 +69,13 @@ def main(argv=None):
     devices = [devmod.resolve(args.device)] if args.device else [d for d in devmod.list_devices() if d.kind == "cpu"]
     folder = Path(tempfile.mkdtemp(prefix="volcl-packets-"))
     scenes = list(args.scenes) + [icosphere_variant(args.scenes[0], s, folder) for s in args.icospheres]
-    configs = [(w, g, v == "on") for w in args.widths for g in args.groups for v in args.vector_step]
+    rough = {"on": True, "off": False, "default": None}
+    configs = [(w, g, v == "on", rough[r]) for w in args.widths for g in args.groups for v in args.vector_step
+               for r in (args.rough_step if v == "on" else ["off"])]
+    label = {True: ", rough step", False: ", no rough step", None: ""}
     print(f"- CPU: {cpu_model()}; {width}x{height}, {args.spp} spp, best of {args.rounds} interleaved rounds\n")
     print("| scene | device | primitives | megakernel M samples/s | "
-          + " | ".join(f"packet {w} lanes, {g}/group{'' if v else ', scalar steps'}" for w, g, v in configs)
+          + " | ".join(f"packet {w} lanes, {g}/group{label[r] if v else ', scalar steps'}" for w, g, v, r in configs)
           + " | same bits |")
     print("|---|---|---|---|" + "---|" * len(configs) + "---|")
     for path in scenes:
@@ -80,11 +86,11 @@ def main(argv=None):
             saved = packets.PACKET_WIDTH, packets.GROUP_PACKETS
             try:
                 renderers = [Renderer(scene, device=dev, engine="megakernel")]
-                for w, g, v in configs:
+                for w, g, v, rs in configs:
                     packets.PACKET_WIDTH, packets.GROUP_PACKETS = w, g
                     r = Renderer(scene, device=dev, engine="packet")
                     # on or off whichever the device's default (packets.vector_step_pays)
-                    r.wavefront = packets.Packets(r.device, r.features, r.packed, vector_step=v)
+                    r.wavefront = packets.Packets(r.device, r.features, r.packed, vector_step=v, rough_step=rs)
                     renderers.append(r)
             finally:
                 packets.MAX_PRIMITIVES = limit

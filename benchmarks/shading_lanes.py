@@ -134,6 +134,7 @@ def floor_material(packed):
         "bitmap": tex["type"] == layout.TEXTURE_TYPES["bitmap"],
         "bilinear": tex["filter"] == layout.TEXTURE_FILTERS["bilinear"],
         "3 channels": tex["channels"] == 3,
+        "byte-coded texels": tex["lut"] >= 0,
     }
     bad = [name for name, ok in checks.items() if not ok]
     if bad:
@@ -182,7 +183,7 @@ class Shading:
         mf = cl.mem_flags
         self.scene_bufs = [cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(a[k]))
                            for k in ("bsdfs", "textures", "texels", "bsdf_tables")]
-        opts = (f"-DSHADE_LUT={int(self.lut)}",) + tuple(extra)
+        opts = tuple(extra)
         with FdCapture() as cap:
             t0 = time.perf_counter()
             self.program = build_program(self.ctx, self.packed.features, KERNEL, extra=opts)

@@ -6,7 +6,10 @@
  * path_surface_event at a diffuse vertex and path_roulette, draw for draw, the shadow ray left to
  * the packet's next queries as VOLCL_DEFER_SHADOWS leaves it. The loop keeps lanes.h's rules: the
  * lanes' state as structure of arrays of 32-bit scalars, every field written for every lane, no
- * branch. Other lanes run the megakernel's scalar steps. */
+ * branch. Lanes whose rays hit a rough plastic triangle (a GGX coating over a constant or bitmap
+ * reflectance: lanes_rough.h) take theirs in a second such loop, where the scene has them and the
+ * runtime's vector code rounds as its scalar code does (volcl.packets.rough_step_pays). Other lanes
+ * run the megakernel's scalar steps. */
 #ifndef VOLCL_PACKET_LANES_H
 #define VOLCL_PACKET_LANES_H
 
@@ -17,6 +20,12 @@
 #include "wavefront_state.h"
 #include "lanes_rows.h"
 #include "lanes_surface.h"
+#ifndef VOLCL_PACKET_ROUGH
+#define VOLCL_PACKET_ROUGH 0    /* 1: some lanes scatter from rough plastic triangles (lanes_rough.h) */
+#endif
+#if VOLCL_PACKET_ROUGH
+#include "lanes_rough.h"
+#endif
 
 #define PL VOLCL_PACKET_WIDTH
 
@@ -34,7 +43,43 @@ typedef struct {
     float sox[PL], soy[PL], soz[PL], sdx[PL], sdy[PL], sdz[PL], st[PL], svx[PL], svy[PL], svz[PL];
 } PacketLanes;
 
-/* Lane l's step, written for every lane (the loop over l is the vectorized one). */
+/* What lane l's step leaves (written for every lane): whether the path goes on, the shadow ray
+ * from `origin` towards ls's light with what it brings (c), the generator, the next ray from p
+ * (its origin o_next, direction wi), the throughput and the direction's pdf. */
+inline void packet_lane_put(PacketLanes *z, int l, bool going, bool nee, const Rng32 *rng, V3 p, V3 ng, V3 o_next,
+                            V3 wi, V3 beta, float pdf, V3 origin, const LanesLight *ls, V3 c) {
+    z->going[l] = going;
+    z->shadow[l] = nee;
+    z->rlo[l] = rng->lo;
+    z->rhi[l] = rng->hi;
+    z->ox[l] = o_next.x;
+    z->oy[l] = o_next.y;
+    z->oz[l] = o_next.z;
+    z->dx[l] = wi.x;
+    z->dy[l] = wi.y;
+    z->dz[l] = wi.z;
+    z->bx[l] = beta.x;
+    z->by[l] = beta.y;
+    z->bz[l] = beta.z;
+    z->px[l] = p.x;
+    z->py[l] = p.y;
+    z->pz[l] = p.z;
+    z->pdf[l] = pdf;
+    z->t_back[l] = lanes_offset_back(o_next, p, ng, wi);
+    z->sox[l] = origin.x;
+    z->soy[l] = origin.y;
+    z->soz[l] = origin.z;
+    z->sdx[l] = ls->wi.x;
+    z->sdy[l] = ls->wi.y;
+    z->sdz[l] = ls->wi.z;
+    z->st[l] = ls->dist * 0.9999f;
+    z->svx[l] = c.x;
+    z->svy[l] = c.y;
+    z->svz[l] = c.z;
+}
+
+/* Lane l's step at a diffuse triangle, written for every lane (the loop over l is the vectorized
+ * one). */
 inline void packet_lane_step(__global const float *table, __global const RenderParams *rp, PacketLanes *z, int l) {
     bool take = z->take[l] != 0;
     LanesTriangle tri = lanes_triangle_gather(table, z->slot[l]);
@@ -61,42 +106,71 @@ inline void packet_lane_step(__global const float *table, __global const RenderP
     bool alive = cont & (v3_max(beta_s) > 0.0f);
     bool killed = lanes_roulette(&rng, &beta_s, alive, depth + 1, rp->rr_depth, z->eta[l]);
     V3 o_next = lanes_offset_origin(p, tri.mag, tri.ng, wi);
-
-    z->going[l] = alive & !killed;
-    z->shadow[l] = nee;
-    z->rlo[l] = rng.lo;
-    z->rhi[l] = rng.hi;
-    z->ox[l] = o_next.x;
-    z->oy[l] = o_next.y;
-    z->oz[l] = o_next.z;
-    z->dx[l] = wi.x;
-    z->dy[l] = wi.y;
-    z->dz[l] = wi.z;
-    z->bx[l] = beta_s.x;
-    z->by[l] = beta_s.y;
-    z->bz[l] = beta_s.z;
-    z->px[l] = p.x;
-    z->py[l] = p.y;
-    z->pz[l] = p.z;
-    z->pdf[l] = pdf;
-    z->t_back[l] = lanes_offset_back(o_next, p, tri.ng, wi);
-    z->sox[l] = origin.x;
-    z->soy[l] = origin.y;
-    z->soz[l] = origin.z;
-    z->sdx[l] = ls.wi.x;
-    z->sdy[l] = ls.wi.y;
-    z->sdz[l] = ls.wi.z;
-    z->st[l] = ls.dist * 0.9999f;
-    z->svx[l] = c.x;
-    z->svy[l] = c.y;
-    z->svz[l] = c.z;
+    packet_lane_put(z, l, alive & !killed, nee, &rng, p, tri.ng, o_next, wi, beta_s, pdf, origin, &ls, c);
 }
 
-/* Every lane's step: the loop LLVM vectorizes (each lane touches its own entries only). */
-inline void packet_lanes_step(__global const float *table, __global const RenderParams *rp, PacketLanes *z) {
-#pragma clang loop unroll(disable) vectorize(assume_safety) vectorize_width(PL) interleave_count(1)
-    for (int l = 0; l < PL; ++l) packet_lane_step(table, rp, z, l);
+#if VOLCL_PACKET_ROUGH
+/* Lane l's step at a rough plastic triangle (lanes_rough.h), written for every lane: as
+ * path_surface_event and path_roulette take it there, draw for draw. */
+inline void packet_rough_lane_step(__global const float *table, __global const float *texels,
+                                   __global const float *tables, __global const RenderParams *rp, PacketLanes *z,
+                                   int l) {
+    bool take = z->take[l] != 0;
+    LanesTriangle tri = lanes_triangle_gather(table, z->slot[l]);
+    LanesRough r = lanes_rough_gather(table, z->slot[l]);
+    V3 color = lanes_rough_color(texels, &tri, &r, z->b1[l], z->b2[l]);
+    V3 d = v3(z->dx[l], z->dy[l], z->dz[l]), beta = v3(z->bx[l], z->by[l], z->bz[l]);
+    int depth = z->depth[l];
+    bool at_limit = (rp->max_depth >= 0) & (depth + 1 >= rp->max_depth);
+    bool scatter = take & !at_limit;    /* nor does a rough plastic one */
+
+    V3 p, frame_s, frame_t, n;
+    float wo_z;
+    lanes_diffuse_vertex(&tri, z->b1[l], z->b2[l], d, &p, &frame_s, &frame_t, &n, &wo_z);
+    V3 wo = lanes_to_local(v3(-d.x, -d.y, -d.z), frame_s, frame_t, n);
+    Rng32 rng = {z->rlo[l], z->rhi[l], z->rinc_lo[l], z->rinc_hi[l]};
+    LanesLight ls;
+    V3 c;
+    float dep;
+    bool nee = lanes_rough_nee(table, tables, rp, &r, color, p, frame_s, frame_t, n, wo, scatter, z->do_nee[l] != 0,
+                               &rng, &ls, &c, &dep);
+    V3 origin = lanes_offset_origin(p, tri.mag, tri.ng, ls.wi);
+
+    bool sampling = scatter & !rp->specular_chains_only;
+    V3 wi, weight;
+    float pdf;
+    bool cont = lanes_rough_bounce(&r, tables, color, &rng, sampling, dep, frame_s, frame_t, n, wo, &wi, &weight, &pdf);
+    V3 beta_s = v3_mul(beta, weight);
+    bool alive = cont & (v3_max(beta_s) > 0.0f);
+    bool killed = lanes_roulette(&rng, &beta_s, alive, depth + 1, rp->rr_depth, z->eta[l]);
+    V3 o_next = lanes_offset_origin(p, tri.mag, tri.ng, wi);
+    packet_lane_put(z, l, alive & !killed, nee, &rng, p, tri.ng, o_next, wi, beta_s, pdf, origin, &ls, c);
 }
+#endif
+
+#ifndef VOLCL_PACKET_STEP_WIDTH
+/* the vectors of a step: a packet's lanes at one kind of surface are a few of its 16, packed to
+ * the front of the step's entries, and a step over all 16 cost more than the scalar steps of
+ * those few at a rough plastic triangle (textured_cbox, PoCL, AMD AVX-512 host: widths 4, 8, 16
+ * 1.12x, 1.12x, 0.94x the scalar steps' speed) */
+#define VOLCL_PACKET_STEP_WIDTH 8
+#endif
+
+/* The first n entries' steps (n a multiple of VOLCL_PACKET_STEP_WIDTH): the loop LLVM vectorizes
+ * (each entry touches its own numbers only). */
+inline void packet_lanes_step(__global const float *table, __global const RenderParams *rp, PacketLanes *z, int n) {
+#pragma clang loop unroll(disable) vectorize(assume_safety) vectorize_width(VOLCL_PACKET_STEP_WIDTH) interleave_count(1)
+    for (int k = 0; k < n; ++k) packet_lane_step(table, rp, z, k);
+}
+
+#if VOLCL_PACKET_ROUGH
+/* The same at rough plastic triangles */
+inline void packet_rough_step(__global const float *table, __global const float *texels, __global const float *tables,
+                              __global const RenderParams *rp, PacketLanes *z, int n) {
+#pragma clang loop unroll(disable) vectorize(assume_safety) vectorize_width(VOLCL_PACKET_STEP_WIDTH) interleave_count(1)
+    for (int k = 0; k < n; ++k) packet_rough_lane_step(table, texels, tables, rp, z, k);
+}
+#endif
 
 #undef PL
 #ifdef __OPTIMIZE__

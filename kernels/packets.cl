@@ -79,32 +79,38 @@ inline void lane_finish(const SceneData *sc, __global const float *filter_table,
 }
 
 #if VOLCL_PACKET_LANES
-/* Lane l's entries of the vector step: its path's, where it takes the step (slot: its triangle's in
- * the table), else zeros, which it runs on unused. */
-inline void lane_load(PacketLanes *z, int l, int slot, const PathState *ps, const Rng *rng, const Hit *h) {
-    bool take = slot >= 0;
-    z->take[l] = take;
-    z->slot[l] = take ? slot : 0;
-    z->depth[l] = take ? ps->depth : 0;
-    z->do_nee[l] = take && ps->do_nee;
-    float3 d = take ? ps->d : (float3)(0.0f), beta = take ? ps->beta : (float3)(0.0f);
-    z->dx[l] = d.x;
-    z->dy[l] = d.y;
-    z->dz[l] = d.z;
-    z->bx[l] = beta.x;
-    z->by[l] = beta.y;
-    z->bz[l] = beta.z;
-    z->b1[l] = take ? h->b1 : 0.0f;
-    z->b2[l] = take ? h->b2 : 0.0f;
-    z->eta[l] = take ? ps->eta_scale : 1.0f;
-    ulong state = take ? rng->state : 0ul, inc = take ? rng->inc : 0ul;
-    z->rlo[l] = (uint)state;
-    z->rhi[l] = (uint)(state >> 32);
-    z->rinc_lo[l] = (uint)inc;
-    z->rinc_hi[l] = (uint)(inc >> 32);
+/* Entry k of a vector step: the path of a lane that takes the step there (slot: its triangle's in
+ * the table). */
+inline void lane_load(PacketLanes *z, int k, int slot, const PathState *ps, const Rng *rng, const Hit *h) {
+    z->take[k] = true;
+    z->slot[k] = slot;
+    z->depth[k] = ps->depth;
+    z->do_nee[k] = ps->do_nee;
+    z->dx[k] = ps->d.x;
+    z->dy[k] = ps->d.y;
+    z->dz[k] = ps->d.z;
+    z->bx[k] = ps->beta.x;
+    z->by[k] = ps->beta.y;
+    z->bz[k] = ps->beta.z;
+    z->b1[k] = h->b1;
+    z->b2[k] = h->b2;
+    z->eta[k] = ps->eta_scale;
+    z->rlo[k] = (uint)rng->state;
+    z->rhi[k] = (uint)(rng->state >> 32);
+    z->rinc_lo[k] = (uint)rng->inc;
+    z->rinc_hi[k] = (uint)(rng->inc >> 32);
 }
 
-/* What lane l's vector step did to its path, as path_surface_event and path_roulette would have
+/* Entry k unused: zeros, which the step runs on, its results unread. */
+inline void lane_clear(PacketLanes *z, int k) {
+    z->take[k] = false;
+    z->slot[k] = z->depth[k] = z->do_nee[k] = 0;
+    z->dx[k] = z->dy[k] = z->dz[k] = z->bx[k] = z->by[k] = z->bz[k] = z->b1[k] = z->b2[k] = 0.0f;
+    z->eta[k] = 1.0f;
+    z->rlo[k] = z->rhi[k] = z->rinc_lo[k] = z->rinc_hi[k] = 0u;
+}
+
+/* What entry l's vector step did to its path, as path_surface_event and path_roulette would have
  * left it: the shadow ray (nee_defer's), the generator, and the scattered ray where it goes on.
  * Whether the path ended. */
 inline bool lane_store(const PacketLanes *z, int l, int shadow_root, PathState *ps, Rng *rng) {
@@ -130,6 +136,24 @@ inline bool lane_store(const PacketLanes *z, int l, int shadow_root, PathState *
     ++ps->depth;
     return false;
 }
+
+/* Zero entries after the first n of a step, up to a whole number of its vectors (VOLCL_PACKET_STEP_WIDTH):
+ * how many entries the step runs. */
+inline int lanes_pad(PacketLanes *z, int n) {
+    int padded = (n + VOLCL_PACKET_STEP_WIDTH - 1) / VOLCL_PACKET_STEP_WIDTH * VOLCL_PACKET_STEP_WIDTH;
+    for (int k = n; k < padded; ++k) lane_clear(z, k);
+    return padded;
+}
+
+/* What a step did to the paths of its first n entries (entry k: lane owner[k]), as the scalar steps
+ * take it back: the sample of a path that ended finished, the lane's next one started. */
+#define LANES_TAKE_BACK(z, owner, n)                                                                           \
+    for (int k = 0; k < (n); ++k) {                                                                           \
+        int l = (owner)[k];                                                                                   \
+        if (lane_store(&(z), k, shadow_root, &ps[l], &rng[l]) || ++job[l].steps >= VOLCL_MAX_STEPS)          \
+            lane_finish(&sc, filter_table, &job[l], passes, sample_base, slots, &ps[l], &rng[l], &alive[l],  \
+                        &finishing[l], &done_L[l], sums, sums_sq, invalid, cutoffs);                          \
+    }
 #endif
 
 VOLCL_KERNEL void render_packets(VOLCL_SCENE_ARGS,
@@ -223,10 +247,16 @@ VOLCL_KERNEL void render_packets(VOLCL_SCENE_ARGS,
             vstoreP(b, 0, blocked);
         }
         /* each lane's step, as integrator_radiance takes it; the lanes whose rays hit a plain diffuse
-         * triangle take theirs together in the vector step, after the others' */
+         * triangle take theirs together in the vector step after the others', and those at a rough
+         * plastic one in the rough step; each step's lanes packed to the front of its entries (lane
+         * owner[k] at entry k) */
 #if VOLCL_PACKET_LANES
         PacketLanes z;
-        bool any_lanes = false;
+        int owner[PW], n_lanes = 0;
+#if VOLCL_PACKET_ROUGH
+        PacketLanes zr;
+        int owner_r[PW], n_rough = 0;
+#endif
 #endif
         for (int l = 0; l < PW; ++l) {
             if (ps[l].shadow) {
@@ -248,9 +278,18 @@ VOLCL_KERNEL void render_packets(VOLCL_SCENE_ARGS,
             bool hit = alive[l] && h.t < ps[l].t_max;
 #if VOLCL_PACKET_LANES
             int slot = hit && h.prim >= 0 ? lanes_slots[h.prim] : -1;
-            lane_load(&z, l, slot, &ps[l], &rng[l], &h);
-            any_lanes |= slot >= 0;
-            if (slot >= 0) continue;
+            if (slot >= 0) {
+#if VOLCL_PACKET_ROUGH
+                if (lanes_table[WF_TRI_AT(WF_TRI_LANES, slot)] > 1.5f) {
+                    lane_load(&zr, n_rough, slot, &ps[l], &rng[l], &h);
+                    owner_r[n_rough++] = l;
+                    continue;
+                }
+#endif
+                lane_load(&z, n_lanes, slot, &ps[l], &rng[l], &h);
+                owner[n_lanes++] = l;
+                continue;
+            }
 #endif
             if (!alive[l]) continue;
             uint cut = 0u;
@@ -262,16 +301,16 @@ VOLCL_KERNEL void render_packets(VOLCL_SCENE_ARGS,
                             &finishing[l], &done_L[l], sums, sums_sq, invalid, cutoffs);
         }
 #if VOLCL_PACKET_LANES
-        if (any_lanes) {
-            packet_lanes_step(lanes_table, params, &z);
-            for (int l = 0; l < PW; ++l) {
-                if (!z.take[l]) continue;
-                bool ended = lane_store(&z, l, shadow_root, &ps[l], &rng[l]) || ++job[l].steps >= VOLCL_MAX_STEPS;
-                if (ended)
-                    lane_finish(&sc, filter_table, &job[l], passes, sample_base, slots, &ps[l], &rng[l], &alive[l],
-                                &finishing[l], &done_L[l], sums, sums_sq, invalid, cutoffs);
-            }
+        if (n_lanes > 0) {
+            packet_lanes_step(lanes_table, params, &z, lanes_pad(&z, n_lanes));
+            LANES_TAKE_BACK(z, owner, n_lanes);
         }
+#if VOLCL_PACKET_ROUGH
+        if (n_rough > 0) {
+            packet_rough_step(lanes_table, sc.texels, sc.bsdf_tables, params, &zr, lanes_pad(&zr, n_rough));
+            LANES_TAKE_BACK(zr, owner_r, n_rough);
+        }
+#endif
 #endif
         live = 0;
         for (int l = 0; l < PW; ++l) live += alive[l] || finishing[l];

@@ -51,8 +51,14 @@
  * corners, 1 where the stage scatters from the triangle itself (plain diffuse), its reflectance
  * rgb (a checkerboard's first colour), 1 for a two-sided bsdf; with VOLCL_WF_CHECKERS, 1 where
  * the reflectance is a checkerboard of two colours on the triangle's uvs, its uvs (u0 v0 u1 v1 u2
- * v2), the texture's to_uv (row-major 2x3) and its second colour rgb */
-#define WF_TRI_COORDS 35
+ * v2), the texture's to_uv (row-major 2x3) and its second colour rgb; for the packet renderer's
+ * rough plastic triangles (1 above is 2 there; lanes_rough.h) the roughness, the specular
+ * sampling weight, eta, 1 / eta^2, the internal reflectance, 1 for a nonlinear bsdf, the specular
+ * reflectance rgb, where its transmittance table starts in the bsdf tables (int bits), 1 where the
+ * diffuse reflectance is a bitmap, the bitmap's width, height, wrap mode, data and lookup table
+ * offsets (int bits; on every triangle a bitmap of the scene's, so that every lane reads within
+ * one) and its to_uv (the triangle's uvs above) */
+#define WF_TRI_COORDS 57
 #define WF_TRI_AT(c, k) (WF_TABLE_ROWS * WF_TABLE_STRIDE + ((c) * VOLCL_WF_TINY + (k)) * 16)
 #define WF_TRI_NG 10
 #define WF_TRI_MAG 13
@@ -63,6 +69,17 @@
 #define WF_TRI_UV 20
 #define WF_TRI_TO_UV 26
 #define WF_TRI_COLOR1 32
+#define WF_TRI_ROUGH_ALPHA 35
+#define WF_TRI_ROUGH_SW 36
+#define WF_TRI_ROUGH_ETA 37
+#define WF_TRI_ROUGH_INV_ETA2 38
+#define WF_TRI_ROUGH_INTERNAL 39
+#define WF_TRI_ROUGH_NONLINEAR 40
+#define WF_TRI_ROUGH_SPEC_R 41
+#define WF_TRI_ROUGH_TABLE 44
+#define WF_TRI_ROUGH_TEXTURED 45
+#define WF_TRI_ROUGH_TEX 46      /* width, height, wrap, data, lut */
+#define WF_TRI_ROUGH_TO_UV 51
 /* then the spheres (VOLCL_WF_SPHERES): centre xyz, radius, primitive code's int bits */
 #define WF_SPH_COORDS 5
 #define WF_SPH_AT(c, k) (WF_TRI_AT(WF_TRI_COORDS, 0) + ((c) * VOLCL_WF_SPHERES + (k)) * 16)

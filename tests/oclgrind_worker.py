@@ -164,6 +164,13 @@ def packet_renderer():
     return PACKET_SURFACE(), None, "packet"
 
 
+def packet_rough_step():
+    """textured_cbox through the packet renderer with its rough plastic floor's lanes in the vector
+    step (kernels/lanes_rough.h): the bitmap's texel and lookup-table reads, the transmittance
+    table's, and the packed entries of both steps."""
+    return load(SCENES / "textured_cbox.xml"), None, "packet rough"
+
+
 def every_feature():
     """The fog scene on the program with every feature compiled in."""
     return load(SCENES / "fog.xml"), all_features()
@@ -197,6 +204,7 @@ FAMILIES = {
     "wavefront_medium_stage": wavefront_medium_stage,
     "wavefront_medium_loop": wavefront_medium_loop,
     "packet_renderer": packet_renderer,
+    "packet_rough_step": packet_rough_step,
 }
 
 
@@ -215,10 +223,12 @@ def main(family, size=8, spp=1):
         wavefront.CHECK_EVERY = 1
         loop = wavefront.LOOP_PATHS if engine.endswith("loop") else 0
         r.wavefront = wavefront.Wavefront(r.device, r.features, r.packed, r.group_items, loop=loop)
-    if engine == "packet":
+    if engine.startswith("packet"):
         # (the simulated device is not a CPU either); two passes in one launch, so that lanes start
         # a second sample while others still finish their first
-        r.wavefront = packets.Packets(r.device, r.features, r.packed, vector_step=True)
+        r.wavefront = packets.Packets(r.device, r.features, r.packed, vector_step=True,
+                                      rough_step=engine.endswith("rough"))
+        assert r.wavefront.rough_step == engine.endswith("rough")
         spp = 2
     res = r.render(spp)
     print(f"{family}: {res.device}, {size}x{size}, {spp} spp, invalid {res.invalid}, "

@@ -35,14 +35,36 @@ def _cpu(device):
         pytest.skip("the packet renderer is for CPU devices")
 
 
+# the surface stage's scene with its box's walls in two-sided rough plastic (GGX): a tiled bitmap
+# mirrored at its edges under a rotated, scaled to_uv ("rough"), a constant nonlinear one
+# ("rough_constant")
+ROUGH = SURFACES.replace(
+    '<bsdf type="twosided"><bsdf type="diffuse"><rgb name="reflectance" value="0.7, 0.6, 0.5"/></bsdf></bsdf>',
+    '<bsdf type="twosided"><bsdf type="roughplastic"><string name="distribution" value="ggx"/>'
+    '<float name="alpha" value="0.2"/><texture type="bitmap" name="diffuse_reflectance">'
+    f'<string name="filename" value="{SCENES / "textures" / "tiles.png"}"/><string name="wrap_mode" value="mirror"/>'
+    '<transform name="to_uv"><rotate z="1" angle="30"/><scale x="1.5" y="2.5"/><translate x="0.2"/></transform>'
+    '</texture></bsdf></bsdf>')
+ROUGH_CONSTANT = SURFACES.replace(
+    '<bsdf type="twosided"><bsdf type="diffuse"><rgb name="reflectance" value="0.7, 0.6, 0.5"/></bsdf></bsdf>',
+    '<bsdf type="twosided"><bsdf type="roughplastic"><string name="distribution" value="ggx"/>'
+    '<float name="alpha" value="0.35"/><boolean name="nonlinear" value="true"/><float name="int_ior" value="1.6"/>'
+    '<rgb name="diffuse_reflectance" value="0.6, 0.5, 0.3"/></bsdf></bsdf>')
+# (the coating dims the walls: brighter area lights, so that every case's image says something)
+ROUGH, ROUGH_CONSTANT = (t.replace('value="4, 4, 4"', 'value="16, 16, 16"').replace('value="1, 2, 3"', 'value="4, 8, 12"')
+                         for t in (ROUGH, ROUGH_CONSTANT))
+assert ROUGH != SURFACES and ROUGH_CONSTANT != SURFACES
+
+
 def _scene(name, size=24, **defaults):
     """cbox (area light, mirror and glass spheres), the surface stage's test scene (a two-sided box,
     two area lights and a point light, a diffuse and a glass sphere), textured_cbox (rough bsdfs,
     bitmaps, bump and normal maps), and cbox under a constant environment (NEE whose shadow rays
     are traced in the whole scene, beside the area light's in the tree without the box's hull) and
     with hidden emitters (camera rays pass through the light: no roulette there)."""
-    if name in ("surfaces", "checkers"):
-        return volcl.load_string(SURFACES if name == "surfaces" else CHECKERS, **defaults)
+    texts = {"surfaces": SURFACES, "checkers": CHECKERS, "rough": ROUGH, "rough_constant": ROUGH_CONSTANT}
+    if name in texts:
+        return volcl.load_string(texts[name], **defaults)
     if name in ("cbox_sky", "cbox_hidden"):
         text = (SCENES / "cbox.xml").read_text()
         if name == "cbox_sky":
@@ -158,11 +180,12 @@ def test_self_test_renders_through_it(device, monkeypatch):
     assert failures and "packet renderer" in failures[0], failures
 
 
-def _packet_renderer(scene, device, estimator=None, vector_step=True):
+def _packet_renderer(scene, device, estimator=None, vector_step=True, rough_step=None):
     """A packet Renderer whose kernel takes its diffuse lanes' steps in the vector lanes or not,
-    whichever the device's default (packets.vector_step_pays)."""
+    whichever the device's default (packets.vector_step_pays), and its rough plastic lanes' there
+    too or not (default: packets.rough_step_pays)."""
     r = Renderer(scene, device=device, estimator=estimator or Estimator(), seed=5, engine="packet")
-    r.wavefront = packets.Packets(r.device, r.features, r.packed, vector_step=vector_step)
+    r.wavefront = packets.Packets(r.device, r.features, r.packed, vector_step=vector_step, rough_step=rough_step)
     return r
 
 
@@ -188,6 +211,68 @@ def test_vector_step_takes_the_diffuse_lanes(device, name):
             images.append(r.render(4))
             _assert_same_paths(mk, images[-1])
         np.testing.assert_array_equal(images[0].image, images[1].image, err_msg=what)
+
+
+@pytest.mark.parametrize("name", ["rough", "rough_constant", "textured_cbox"])
+def test_rough_step_takes_the_rough_plastic_lanes(device, name):
+    """Lanes whose rays hit a rough plastic triangle the step handles (kernels/lanes_rough.h: GGX,
+    a bitmap reflectance mirrored at its edges under a to_uv in "rough", a constant nonlinear one
+    in "rough_constant", textured_cbox's tiled floor beside bsdfs it leaves to the scalar steps)
+    take their step in the vector lanes, on every runtime when asked to: the megakernel's image
+    within the standard errors across the estimator choices and a depth limit, with point and area
+    lights and two-sided walls; and on PoCL, where it is the default, for one seed the megakernel's
+    paths and the bits of the scalar steps. (Intel's runtime rounds the step's vector code
+    otherwise than its scalar code, so one seed's paths part there: about 1% of the channels.)"""
+    _cpu(device)
+    lanes = wavefront.diffuse_lanes(Renderer(_scene(name), device=device, engine="megakernel").packed, rough=True)
+    assert lanes is not None and lanes[5] == 1 and lanes[6] == (name != "rough_constant"), name
+    for what in sorted(CASES):
+        estimator, defaults = CASES[what]
+        scene = _scene(name, **defaults)
+        mk = Renderer(scene, device=device, estimator=estimator, seed=5, engine="megakernel")
+        rough = _packet_renderer(scene, device, estimator, True, True)
+        assert rough.wavefront.rough_step, what
+        other = Renderer(scene, device=device, estimator=estimator, seed=6, engine="packet")
+        other.wavefront = rough.wavefront
+        assert_same_image(mk.render(32), other.render(32), what=f"{name}, {what}: megakernel and rough step")
+        if packets.rough_step_pays(device):
+            mk.reset()
+            image = rough.render(4)
+            _assert_same_paths(mk.render(4), image)
+            scalar = _packet_renderer(scene, device, estimator, True, False)
+            assert not scalar.wavefront.rough_step
+            np.testing.assert_array_equal(image.image, scalar.render(4).image, err_msg=what)
+
+
+@pytest.mark.parametrize("change, taken", [
+    ("", True),
+    ('<string name="distribution" value="beckmann"/>', False),
+    ('<boolean name="sample_visible" value="false"/>', False),
+    ('<texture type="bitmap" name="diffuse_reflectance"><string name="filename" value="textures/tiles.png"/>'
+     '<string name="filter_type" value="nearest"/></texture>', False),
+    ('<texture type="bitmap" name="diffuse_reflectance"><string name="filename" value="textures/bumps.exr"/>'
+     '</texture>', False),
+    ('<texture type="checkerboard" name="diffuse_reflectance"/>', False),
+])
+def test_which_rough_plastics_the_rough_step_takes(device, change, taken):
+    """The rough step takes GGX sampled by its visible normals with a constant or bilinear
+    byte-coded bitmap reflectance (Mitsuba's roughplastic is isotropic, its roughness a number);
+    it leaves Beckmann, all-normal sampling, nearest lookups, float texels and checkerboards to the
+    scalar steps, as it does a roughplastic inside a bump map."""
+    _cpu(device)
+    default = '' if "distribution" in change else '<string name="distribution" value="ggx"/>'
+    alpha = '' if "alpha" in change else '<float name="alpha" value="0.2"/>'
+    panel = ('<shape type="rectangle"><transform name="to_world"><scale value="0.3"/><translate y="1" z="0.5"/>'
+             f'</transform><bsdf type="roughplastic">{default}{alpha}{change}</bsdf></shape>')
+    for wrapped in (False, True):
+        text = panel.replace('<bsdf type="roughplastic">', '<bsdf type="bumpmap"><texture type="bitmap" '
+                             'name="map"><string name="filename" value="textures/bumps.exr"/></texture>'
+                             '<bsdf type="roughplastic">').replace("</bsdf></shape>", "</bsdf></bsdf></shape>") \
+            if wrapped else panel
+        packed = Renderer(cbox_with(text), device=device, engine="megakernel").packed
+        lanes = wavefront.diffuse_lanes(packed, rough=True)
+        assert lanes is not None
+        assert lanes[5] == (taken and not wrapped), (change, wrapped)
 
 
 def test_vector_step_only_where_it_can(device):

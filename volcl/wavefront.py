@@ -34,6 +34,7 @@ import numpy as np
 
 from . import device as devmod
 from . import layout
+from . import lanes_rough
 from . import packets
 from .errors import VolclError
 from .opencl import cl
@@ -52,7 +53,7 @@ TABLE_ROWS = 18
 T_LIGHT_POS, T_LIGHT_VALUE, T_SIGMA_T, T_ALBEDO, T_G, T_ISO, T_LANES, T_POINT, T_AREA, T_SEALED = (
     0, 3, 6, 9, 12, 13, 14, 15, 16, 17)
 TRI_SPACING = 16        # words between a tiny scene's triangle numbers (wavefront_state.h WF_TRI_AT)
-TRI_COORDS, SPHERE_COORDS, LIGHT_TRI_COORDS = 35, 5, 16     # numbers per triangle, sphere, light triangle
+TRI_COORDS, SPHERE_COORDS, LIGHT_TRI_COORDS = 57, 5, 16     # numbers per triangle, sphere, light triangle
 # the most triangles and spheres of a scene the lanes stage traces itself, testing every one for
 # every ray (kernels/lanes_triangles.h), and light triangles the surface stage samples
 TINY_LANES = 16
@@ -214,21 +215,23 @@ def _tiny_triangles(packed, count):
     return leaves["v"].transpose(0, 2, 1)[used].reshape(count, 3, 3), leaves["prim"][used]
 
 
-def _lanes_surfaces(packed, corners, codes):
+def _lanes_surfaces(packed, corners, codes, rough=False):
     """Which tested triangles the surface stage scatters from itself (wavefront_surface.cl): plain
     diffuse, untextured or with a checkerboard of two colours on the mesh's uv, flat, not
-    emitting, with a normal whose library bits are known; their normals and bsdf records, and which
-    of them are checkerboards (_checkers)."""
+    emitting, with a normal whose library bits are known; their normals and bsdf records, which
+    of them are checkerboards (_checkers); and with `rough` which are rough plastic ones the packet
+    renderer's vector step takes (volcl.lanes_rough), and which of those read a bitmap."""
     tris, shapes, bsdfs = packed.arrays["triangles"], packed.arrays["shapes"], packed.arrays["bsdfs"]
     shape = shapes[tris["shape"][codes]]
     bsdf = bsdfs[shape["bsdf"]]
     ng, ok = _library_normals(corners[:, 0], corners[:, 1], corners[:, 2])
     checker = _checkers(packed, codes, shape, bsdf)
     plain = (bsdf["color_tex"] < 0) & (bsdf["flags"] & FLAG_UV == 0)
-    lanes = (ok & (bsdf["type"] == layout.BSDF_TYPES["diffuse"]) & (plain | checker)
-             & (bsdf["flags"] & (FLAG_UV_FRAME | FLAG_PASSES) == 0)
-             & (shape["light"] < 0) & (tris["normals"][codes] < 0))
-    return lanes, ng, bsdf, checker & lanes
+    surface = ok & (shape["light"] < 0) & (tris["normals"][codes] < 0)
+    lanes = (surface & (bsdf["type"] == layout.BSDF_TYPES["diffuse"]) & (plain | checker)
+             & (bsdf["flags"] & (FLAG_UV_FRAME | FLAG_PASSES) == 0))
+    smooth, textured = lanes_rough.surfaces(packed, codes, shape, bsdf) if rough else (np.zeros(len(codes), bool),) * 2
+    return lanes, ng, bsdf, checker & lanes, smooth & surface, textured & surface
 
 
 def _checkers(packed, codes, shape, bsdf):
@@ -278,25 +281,29 @@ def lanes_lights(packed) -> str | None:
     return None
 
 
-def diffuse_lanes(packed) -> tuple[np.ndarray, np.ndarray, int, int, int] | None:
+def diffuse_lanes(packed, rough: bool = False) -> tuple[np.ndarray, np.ndarray, int, int, int, int, int] | None:
     """The table with which the lanes scatter from the scene's plain diffuse triangles
-    (lanes_surface.h: untextured or checkered with two colours, flat, not emitting), every used
-    triangle of the scene's leaf packets in packet order, and a slot per triangle row (-1 where the
-    lanes do not scatter from it); with the table's triangle and light triangle counts
-    (VOLCL_WF_TINY, VOLCL_WF_LIGHT_TRIS) and 1 where some of them are checkered
-    (VOLCL_WF_CHECKERS), else 0. None where there is no such triangle or the lanes cannot sample
-    the lights."""
+    (lanes_surface.h: untextured or checkered with two colours, flat, not emitting), and with
+    `rough` also from its rough plastic ones (volcl.lanes_rough), every used triangle of the
+    scene's leaf packets in packet order, and a slot per triangle row (-1 where the lanes do not
+    scatter from it); with the table's triangle and light triangle counts (VOLCL_WF_TINY,
+    VOLCL_WF_LIGHT_TRIS), 1 where some of them are checkered (VOLCL_WF_CHECKERS), 1 where some
+    are rough plastic ones (VOLCL_PACKET_ROUGH) and 1 where some of those read a bitmap
+    (VOLCL_PACKET_ROUGH_BITMAPS), else 0s. None where there is no such triangle or the lanes cannot
+    sample the lights."""
     leaves = scene_leaves(packed)
     count = int(_used_lanes(leaves).sum())
     if count == 0 or lanes_lights(packed):
         return None
     corners, codes = _tiny_triangles(packed, count)
-    lanes, _, _, checker = _lanes_surfaces(packed, corners, codes)
-    if not lanes.any():
+    lanes, _, _, checker, smooth, textured = _lanes_surfaces(packed, corners, codes, rough)
+    taken = lanes | smooth
+    if not taken.any():
         return None
     slots = np.full(max(len(packed.arrays["triangles"]), 1), -1, np.int32)
-    slots[codes[lanes]] = np.flatnonzero(lanes)
-    return lanes_table(packed, count, 0, True), slots, count, len(_light_triangles(packed)[0]), int(checker.any())
+    slots[codes[taken]] = np.flatnonzero(taken)
+    return (lanes_table(packed, count, 0, True, rough), slots, count, len(_light_triangles(packed)[0]),
+            int(checker.any()), int(smooth.any()), int(textured.any()))
 
 
 def _light_triangles(packed):
@@ -317,10 +324,11 @@ def _light_triangles(packed):
             np.asarray(out[3], np.float32))
 
 
-def lanes_table(packed, tiny: int = 0, spheres: int = 0, surface: bool = False) -> np.ndarray:
+def lanes_table(packed, tiny: int = 0, spheres: int = 0, surface: bool = False, rough: bool = False) -> np.ndarray:
     """The lights' and media's parameters the lanes stage reads (wavefront_state.h's table); with
-    `tiny` the scene's triangles and spheres in packet order (lanes_triangles.h), and with `surface`
-    the tested triangles' diffuse surfaces and the light triangles (wavefront_surface.cl)."""
+    `tiny` the scene's triangles and spheres in packet order (lanes_triangles.h), with `surface`
+    the tested triangles' diffuse surfaces and the light triangles (wavefront_surface.cl), and with
+    `rough` their rough plastic ones (lanes_rough.h)."""
     t = np.zeros((TABLE_ROWS, TABLE_STRIDE), np.float32)
     tri = np.zeros((TRI_COORDS, tiny, TRI_SPACING), np.float32)
     sph = np.zeros((SPHERE_COORDS, spheres, TRI_SPACING), np.float32)
@@ -329,10 +337,10 @@ def lanes_table(packed, tiny: int = 0, spheres: int = 0, surface: bool = False) 
         tri[:9, :, 0] = corners.reshape(tiny, 9).T
         tri[9, :, 0] = codes.astype(np.int32).view(np.float32)
         if surface:
-            lanes, ng, bsdf, checker = _lanes_surfaces(packed, corners, codes)
+            lanes, ng, bsdf, checker, smooth, textured = _lanes_surfaces(packed, corners, codes, rough)
             tri[10:13, :, 0] = ng.T
             tri[13, :, 0] = np.abs(corners).max(axis=(1, 2))
-            tri[14, :, 0] = lanes
+            tri[14, :, 0] = np.where(smooth, lanes_rough.KIND, lanes)
             tri[15:18, :, 0] = bsdf["color"].T
             tri[18, :, 0] = bsdf["twosided"] != 0
             if checker.any():
@@ -345,6 +353,8 @@ def lanes_table(packed, tiny: int = 0, spheres: int = 0, surface: bool = False) 
                 tri[20:26, checker, 0] = uvs[checker].T
                 tri[26:32, checker, 0] = tex["to_uv"][checker].T
                 tri[32:35, checker, 0] = tex["color1"][checker].T
+            if smooth.any():
+                lanes_rough.fill(tri, packed, codes, bsdf, smooth, textured)
     if spheres:
         leaves = scene_leaves(packed)
         code = leaves["prim"][leaves["prim"] < 0]
