@@ -60,7 +60,7 @@ def main(argv=None):
     p.add_argument("--groups", nargs="+", type=int, default=[1])
     p.add_argument("--vector-step", nargs="+", choices=["on", "off"], default=["on"])
     p.add_argument("--rough-step", nargs="+", choices=["on", "off", "default"], default=["default"],
-                   help="default: whichever the device's (packets.rough_step_pays)")
+                   help="default: whichever the device's (packets.bsdf_steps_pay)")
     args = p.parse_args(argv)
     import volcl
     from volcl import device as devmod, packets
@@ -90,7 +90,7 @@ def main(argv=None):
                     packets.PACKET_WIDTH, packets.GROUP_PACKETS = w, g
                     r = Renderer(scene, device=dev, engine="packet")
                     # on or off whichever the device's default (packets.vector_step_pays)
-                    r.wavefront = packets.Packets(r.device, r.features, r.packed, vector_step=v, rough_step=rs)
+                    r.wavefront = packets.Packets(r.device, r.features, r.packed, vector_step=v, bsdf_steps=rs)
                     renderers.append(r)
             finally:
                 packets.MAX_PRIMITIVES = limit

@@ -14,25 +14,19 @@
 #ifndef VOLCL_LANES_ROUGH_H
 #define VOLCL_LANES_ROUGH_H
 
-#ifndef VOLCL_PACKET_ROUGH_BITMAPS
-#define VOLCL_PACKET_ROUGH_BITMAPS 0    /* 1: some rough triangle's diffuse reflectance is a bitmap */
-#endif
+#include "lanes_bitmap.h"
 
-/* A rough plastic triangle's bsdf and texture numbers (wavefront_state.h WF_TRI_ROUGH...) */
+/* A rough plastic triangle's bsdf numbers (wavefront_state.h WF_TRI_ROUGH...) */
 typedef struct {
     float alpha, sw, eta, inv_eta2, internal_refl;
     bool nonlinear, textured;
     V3 spec_r;
     int table;
-    int width, height, wrap, data, lut;
-    float m0, m1, m2, m3, m4, m5;
-    float u0, v0, u1, v1, u2, v2;       /* the triangle's uvs (WF_TRI_UV) */
 } LanesRough;
 
 inline LanesRough lanes_rough_gather(__global const float *table, int slot) {
     LanesRough r;
 #define TV(c) table[WF_TRI_AT(c, slot)]
-#define TI(c) as_int(TV(c))
     r.alpha = TV(WF_TRI_ROUGH_ALPHA);
     r.sw = TV(WF_TRI_ROUGH_SW);
     r.eta = TV(WF_TRI_ROUGH_ETA);
@@ -41,94 +35,26 @@ inline LanesRough lanes_rough_gather(__global const float *table, int slot) {
     r.nonlinear = TV(WF_TRI_ROUGH_NONLINEAR) > 0.0f;
     r.textured = TV(WF_TRI_ROUGH_TEXTURED) > 0.0f;
     r.spec_r = v3(TV(WF_TRI_ROUGH_SPEC_R), TV(WF_TRI_ROUGH_SPEC_R + 1), TV(WF_TRI_ROUGH_SPEC_R + 2));
-    r.table = TI(WF_TRI_ROUGH_TABLE);
-    r.width = TI(WF_TRI_ROUGH_TEX);
-    r.height = TI(WF_TRI_ROUGH_TEX + 1);
-    r.wrap = TI(WF_TRI_ROUGH_TEX + 2);
-    r.data = TI(WF_TRI_ROUGH_TEX + 3);
-    r.lut = TI(WF_TRI_ROUGH_TEX + 4);
-    r.m0 = TV(WF_TRI_ROUGH_TO_UV);
-    r.m1 = TV(WF_TRI_ROUGH_TO_UV + 1);
-    r.m2 = TV(WF_TRI_ROUGH_TO_UV + 2);
-    r.m3 = TV(WF_TRI_ROUGH_TO_UV + 3);
-    r.m4 = TV(WF_TRI_ROUGH_TO_UV + 4);
-    r.m5 = TV(WF_TRI_ROUGH_TO_UV + 5);
-    r.u0 = TV(WF_TRI_UV);
-    r.v0 = TV(WF_TRI_UV + 1);
-    r.u1 = TV(WF_TRI_UV + 2);
-    r.v1 = TV(WF_TRI_UV + 3);
-    r.u2 = TV(WF_TRI_UV + 4);
-    r.v2 = TV(WF_TRI_UV + 5);
-#undef TI
+    r.table = as_int(TV(WF_TRI_ROUGH_TABLE));
 #undef TV
     return r;
 }
 
-/* normalize (the library's, on the unit-scale vectors met here) */
-inline V3 lanes_normalize(V3 a) { return v3_scale(a, rsqrt(lanes_dot(a, a))); }
 
-#if VOLCL_PACKET_ROUGH_BITMAPS
-/* texture_wrap (textures.h) for every mode, chosen by selects; the integer division by `res` done
- * as a float quotient corrected by one either way (exact while |p| / res < 2^22: texel coordinates
- * of a few million texels) */
-inline int lanes_wrap(int p, int res, float inv_res, int mode) {
-    int q = (int)floor((float)p * inv_res);
-    int m = p - q * res;
-    q = m < 0 ? q - 1 : q;
-    m = m < 0 ? m + res : m;
-    q = m >= res ? q + 1 : q;
-    m = m >= res ? m - res : m;
-    /* the floored period index: odd periods run backwards */
-    int mirrored = (q & 1) ? res - 1 - m : m;
-    int clamped = clamp(p, 0, res - 1);
-    return mode == TEX_WRAP_CLAMP ? clamped : (mode == TEX_WRAP_MIRROR ? mirrored : m);
-}
-
-/* texel_at (textures.h): a byte-coded colour texel, already wrapped */
-inline V3 lanes_texel(__global const float *texels, const LanesRough *r, int x, int y) {
-    int at = (y * r->width + x) * 3;
-    __global const uchar *bytes = (__global const uchar *)(texels + r->data) + at;
-    __global const float *lut = texels + r->lut;
-    return v3(lut[bytes[0]], lut[bytes[1]], lut[bytes[2]]);
-}
-
-/* bitmap_lookup (textures.h), bilinear, at the triangle's uv (texture_map_uv first) */
-inline V3 lanes_bitmap(__global const float *texels, const LanesRough *r, float u, float v) {
-    float px0 = r->m0 * u + r->m1 * v + r->m2;
-    float py0 = r->m3 * u + r->m4 * v + r->m5;
-    float px = texel_coordinate(px0 * (float)r->width), py = texel_coordinate(py0 * (float)r->height);
-    px -= 0.5f;
-    py -= 0.5f;
-    float fx = floor(px), fy = floor(py);
-    int x = (int)fx, y = (int)fy;
-    float wx = px - fx, wy = py - fy;
-    float inv_w = 1.0f / (float)r->width, inv_h = 1.0f / (float)r->height;
-    int x0 = lanes_wrap(x, r->width, inv_w, r->wrap), x1 = lanes_wrap(x + 1, r->width, inv_w, r->wrap);
-    int y0 = lanes_wrap(y, r->height, inv_h, r->wrap), y1 = lanes_wrap(y + 1, r->height, inv_h, r->wrap);
-    V3 c00 = lanes_texel(texels, r, x0, y0), c10 = lanes_texel(texels, r, x1, y0);
-    V3 c01 = lanes_texel(texels, r, x0, y1), c11 = lanes_texel(texels, r, x1, y1);
-    float ax = c00.x * (1.0f - wx) + c10.x * wx, ay = c00.y * (1.0f - wx) + c10.y * wx,
-          az = c00.z * (1.0f - wx) + c10.z * wx;
-    float bx = c01.x * (1.0f - wx) + c11.x * wx, by = c01.y * (1.0f - wx) + c11.y * wx,
-          bz = c01.z * (1.0f - wx) + c11.z * wx;
-    return v3(ax * (1.0f - wy) + bx * wy, ay * (1.0f - wy) + by * wy, az * (1.0f - wy) + bz * wy);
-}
-#endif
-
-/* The diffuse reflectance at the hit's barycentrics: surface_texcoords' uv (texcoords_triangle,
- * as lanes_color_at computes it), then the bitmap; or the constant */
+/* The diffuse reflectance at the hit's barycentrics: the bitmap's (lanes_bitmap.h), or the
+ * constant */
 inline V3 lanes_rough_color(__global const float *texels, const LanesTriangle *t, const LanesRough *r, float b1,
-                            float b2) {
-#if VOLCL_PACKET_ROUGH_BITMAPS
-    float b0 = 1.0f - b1 - b2;
-    float u = r->u0 * b0 + r->u1 * b1 + r->u2 * b2;
-    float v = r->v0 * b0 + r->v1 * b1 + r->v2 * b2;
-    return v3_sel(r->textured, lanes_bitmap(texels, r, u, v), t->color);
+                            float b2, __global const float *table, int slot) {
+#if VOLCL_PACKET_BITMAPS
+    LanesBitmap bm = lanes_bitmap_gather(table, slot);
+    return v3_sel(r->textured, lanes_bitmap_at(texels, &bm, b1, b2), t->color);
 #else
     (void)texels;
     (void)r;
     (void)b1;
     (void)b2;
+    (void)table;
+    (void)slot;
     return t->color;
 #endif
 }
@@ -236,9 +162,6 @@ inline V3 lanes_ggx_sample(float a, V3 wi, float u0, float u1) {
     float my = lanes_after((sin_phi * slx + cos_phi * sly) * a, mx);
     return lanes_normalize(v3(-mx, -my, 1.0f));
 }
-
-/* frame_to_local (common.h) */
-inline V3 lanes_to_local(V3 v, V3 s, V3 t, V3 n) { return v3(lanes_dot(v, s), lanes_dot(v, t), lanes_dot(v, n)); }
 
 /* path_surface_nee at a rough plastic vertex (lanes_diffuse_nee's draws and light sample), with
  * bsdf_eval in the frame (s, t, n): whether it leaves a shadow ray, and what the ray brings where

@@ -140,6 +140,9 @@ inline V3 lanes_to_world(V3 v, V3 s, V3 t, V3 n) {
     return v3(v.x * s.x + v.y * t.x + v.z * n.x, v.x * s.y + v.y * t.y + v.z * n.y, v.x * s.z + v.y * t.z + v.z * n.z);
 }
 
+/* frame_to_local (common.h) */
+inline V3 lanes_to_local(V3 v, V3 s, V3 t, V3 n) { return v3(lanes_dot(v, s), lanes_dot(v, t), lanes_dot(v, n)); }
+
 /* sample_cosine_hemisphere (sampling.h) */
 inline V3 lanes_cosine_hemisphere(float u0, float u1) {
     float dx, dy;

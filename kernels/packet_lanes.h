@@ -8,7 +8,7 @@
  * lanes' state as structure of arrays of 32-bit scalars, every field written for every lane, no
  * branch. Lanes whose rays hit a rough plastic triangle (a GGX coating over a constant or bitmap
  * reflectance: lanes_rough.h) take theirs in a second such loop, where the scene has them and the
- * runtime's vector code rounds as its scalar code does (volcl.packets.rough_step_pays). Other lanes
+ * runtime's vector code rounds as its scalar code does (volcl.packets.bsdf_steps_pay). Other lanes
  * run the megakernel's scalar steps. */
 #ifndef VOLCL_PACKET_LANES_H
 #define VOLCL_PACKET_LANES_H
@@ -118,7 +118,7 @@ inline void packet_rough_lane_step(__global const float *table, __global const f
     bool take = z->take[l] != 0;
     LanesTriangle tri = lanes_triangle_gather(table, z->slot[l]);
     LanesRough r = lanes_rough_gather(table, z->slot[l]);
-    V3 color = lanes_rough_color(texels, &tri, &r, z->b1[l], z->b2[l]);
+    V3 color = lanes_rough_color(texels, &tri, &r, z->b1[l], z->b2[l], table, z->slot[l]);
     V3 d = v3(z->dx[l], z->dy[l], z->dz[l]), beta = v3(z->bx[l], z->by[l], z->bz[l]);
     int depth = z->depth[l];
     bool at_limit = (rp->max_depth >= 0) & (depth + 1 >= rp->max_depth);

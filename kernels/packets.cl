@@ -280,7 +280,7 @@ VOLCL_KERNEL void render_packets(VOLCL_SCENE_ARGS,
             int slot = hit && h.prim >= 0 ? lanes_slots[h.prim] : -1;
             if (slot >= 0) {
 #if VOLCL_PACKET_ROUGH
-                if (lanes_table[WF_TRI_AT(WF_TRI_LANES, slot)] > 1.5f) {
+                if (lanes_table[WF_TRI_AT(WF_TRI_LANES, slot)] == 2.0f) {
                     lane_load(&zr, n_rough, slot, &ps[l], &rng[l], &h);
                     owner_r[n_rough++] = l;
                     continue;

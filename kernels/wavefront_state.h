@@ -57,7 +57,7 @@
  * reflectance rgb, where its transmittance table starts in the bsdf tables (int bits), 1 where the
  * diffuse reflectance is a bitmap, the bitmap's width, height, wrap mode, data and lookup table
  * offsets (int bits; on every triangle a bitmap of the scene's, so that every lane reads within
- * one) and its to_uv (the triangle's uvs above) */
+ * one) and its to_uv (lanes_bitmap.h; the triangle's uvs above) */
 #define WF_TRI_COORDS 57
 #define WF_TRI_AT(c, k) (WF_TABLE_ROWS * WF_TABLE_STRIDE + ((c) * VOLCL_WF_TINY + (k)) * 16)
 #define WF_TRI_NG 10
@@ -78,8 +78,8 @@
 #define WF_TRI_ROUGH_SPEC_R 41
 #define WF_TRI_ROUGH_TABLE 44
 #define WF_TRI_ROUGH_TEXTURED 45
-#define WF_TRI_ROUGH_TEX 46      /* width, height, wrap, data, lut */
-#define WF_TRI_ROUGH_TO_UV 51
+#define WF_TRI_BITMAP 46         /* width, height, wrap, data, lut */
+#define WF_TRI_BITMAP_TO_UV 51
 /* then the spheres (VOLCL_WF_SPHERES): centre xyz, radius, primitive code's int bits */
 #define WF_SPH_COORDS 5
 #define WF_SPH_AT(c, k) (WF_TRI_AT(WF_TRI_COORDS, 0) + ((c) * VOLCL_WF_SPHERES + (k)) * 16)

@@ -227,8 +227,8 @@ def main(family, size=8, spp=1):
         # (the simulated device is not a CPU either); two passes in one launch, so that lanes start
         # a second sample while others still finish their first
         r.wavefront = packets.Packets(r.device, r.features, r.packed, vector_step=True,
-                                      rough_step=engine.endswith("rough"))
-        assert r.wavefront.rough_step == engine.endswith("rough")
+                                      bsdf_steps=engine.endswith("rough"))
+        assert bool(r.wavefront.bsdf_steps) == engine.endswith("rough")
         spp = 2
     res = r.render(spp)
     print(f"{family}: {res.device}, {size}x{size}, {spp} spp, invalid {res.invalid}, "

@@ -180,12 +180,12 @@ def test_self_test_renders_through_it(device, monkeypatch):
     assert failures and "packet renderer" in failures[0], failures
 
 
-def _packet_renderer(scene, device, estimator=None, vector_step=True, rough_step=None):
+def _packet_renderer(scene, device, estimator=None, vector_step=True, bsdf_steps=None):
     """A packet Renderer whose kernel takes its diffuse lanes' steps in the vector lanes or not,
     whichever the device's default (packets.vector_step_pays), and its rough plastic lanes' there
-    too or not (default: packets.rough_step_pays)."""
+    too or not (default: packets.bsdf_steps_pay)."""
     r = Renderer(scene, device=device, estimator=estimator or Estimator(), seed=5, engine="packet")
-    r.wavefront = packets.Packets(r.device, r.features, r.packed, vector_step=vector_step, rough_step=rough_step)
+    r.wavefront = packets.Packets(r.device, r.features, r.packed, vector_step=vector_step, bsdf_steps=bsdf_steps)
     return r
 
 
@@ -224,23 +224,23 @@ def test_rough_step_takes_the_rough_plastic_lanes(device, name):
     paths and the bits of the scalar steps. (Intel's runtime rounds the step's vector code
     otherwise than its scalar code, so one seed's paths part there: about 1% of the channels.)"""
     _cpu(device)
-    lanes = wavefront.diffuse_lanes(Renderer(_scene(name), device=device, engine="megakernel").packed, rough=True)
-    assert lanes is not None and lanes[5] == 1 and lanes[6] == (name != "rough_constant"), name
+    lanes = wavefront.diffuse_lanes(Renderer(_scene(name), device=device, engine="megakernel").packed, bsdfs=True)
+    assert lanes is not None and lanes.rough == 1 and lanes.bitmaps == (name != "rough_constant"), name
     for what in sorted(CASES):
         estimator, defaults = CASES[what]
         scene = _scene(name, **defaults)
         mk = Renderer(scene, device=device, estimator=estimator, seed=5, engine="megakernel")
         rough = _packet_renderer(scene, device, estimator, True, True)
-        assert rough.wavefront.rough_step, what
+        assert rough.wavefront.bsdf_steps == ("rough",), what
         other = Renderer(scene, device=device, estimator=estimator, seed=6, engine="packet")
         other.wavefront = rough.wavefront
         assert_same_image(mk.render(32), other.render(32), what=f"{name}, {what}: megakernel and rough step")
-        if packets.rough_step_pays(device):
+        if packets.bsdf_steps_pay(device):
             mk.reset()
             image = rough.render(4)
             _assert_same_paths(mk.render(4), image)
             scalar = _packet_renderer(scene, device, estimator, True, False)
-            assert not scalar.wavefront.rough_step
+            assert scalar.wavefront.bsdf_steps == ()
             np.testing.assert_array_equal(image.image, scalar.render(4).image, err_msg=what)
 
 
@@ -270,9 +270,9 @@ def test_which_rough_plastics_the_rough_step_takes(device, change, taken):
                              '<bsdf type="roughplastic">').replace("</bsdf></shape>", "</bsdf></bsdf></shape>") \
             if wrapped else panel
         packed = Renderer(cbox_with(text), device=device, engine="megakernel").packed
-        lanes = wavefront.diffuse_lanes(packed, rough=True)
+        lanes = wavefront.diffuse_lanes(packed, bsdfs=True)
         assert lanes is not None
-        assert lanes[5] == (taken and not wrapped), (change, wrapped)
+        assert lanes.rough == (taken and not wrapped), (change, wrapped)
 
 
 def test_vector_step_only_where_it_can(device):

@@ -76,3 +76,26 @@ def test_volcl_reads_every_variant(written):
     assert features["plain textures"]["ROUGHPLASTIC"] and features["plain textures"]["ROUGHCONDUCTOR"]
     assert not features["every bsdf diffuse"]["ROUGHPLASTIC"]
     assert not features["every bsdf diffuse"]["ROUGHCONDUCTOR"]
+
+
+def test_albedo_variants(tmp_path):
+    """--albedo: each non-diffuse shape made diffuse of its own albedo (the floor's bitmap's mean
+    linear colour, the normal-mapped wall's inner reflectance, grey for the gold sphere), one at a
+    time and then together; volcl reads every one."""
+    import numpy as np
+    from volcl.scene.images import read_image
+    files = dict(scene_variants.write_variants(SCENE, tmp_path, by_albedo=True))
+    assert list(files)[0] == "as shipped"
+    singles = [k for k in files if k.startswith("diffuse on ") and "," not in k]
+    assert len(singles) == 4, singles      # floor, back wall, sphere, cube
+    root = ET.parse(files["diffuse on floor"]).getroot()
+    floor = [s for s in root.iter("shape") if s.get("id") == "floor"][0]
+    value = [float(v) for v in floor.find("bsdf[@type='diffuse']/rgb").get("value").split(",")]
+    tiles = read_image(str(ROOT / "scenes" / "textures" / "tiles.png"))[..., :3].reshape(-1, 3).mean(axis=0)
+    np.testing.assert_allclose(value, tiles, atol=1e-4)
+    back = [s for s in ET.parse(files["diffuse on back"]).getroot().iter("shape") if s.get("id") == "back"][0]
+    assert back.find("bsdf[@type='diffuse']/rgb").get("value") == "0.725, 0.71, 0.68"
+    last = ET.parse(list(files.values())[-1]).getroot()
+    assert {b.get("type") for s in last.iter("shape") for b in s.findall("bsdf")} == {"diffuse"}
+    for path in files.values():
+        volcl.load_file(path)

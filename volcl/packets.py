@@ -5,7 +5,7 @@ rays (continuation and shadow rays together) are traced in the SIMD lanes agains
 
 The lanes run the megakernel's path functions (lanes that hit a plain diffuse triangle take that
 step together in the vector lanes where vector_step_pays, kernels/packet_lanes.h, and those at a
-rough plastic one where rough_step_pays too, kernels/lanes_rough.h, with the same arithmetic), so
+rough plastic one where bsdf_steps_pay too, kernels/lanes_rough.h, with the same arithmetic), so
 a pixel gets the same samples, added in the same order into the same accumulator
 entry; the queries make the tree's tests with its arithmetic, so the hits have its bits, but for
 which of two primitives at the same distance wins where the tree visits them in another order.
@@ -56,12 +56,12 @@ def vector_step_pays(device) -> bool:
     return devmod.is_pocl(device)
 
 
-def rough_step_pays(device) -> bool:
+def bsdf_steps_pay(device) -> bool:
     """Whether the vector step also takes the lanes at rough plastic triangles (kernels/lanes_rough.h)
-    on this device, where it takes a vector step at all: on PoCL, whose vector code gives its
-    scalar code's bits there; not on Intel's CPU runtime, whose vector code rounds the microfacet
-    arithmetic otherwise (a weight 3e-3 off, which sends a path elsewhere:
-    benchmarks/shading_lanes.py, README). Packets(rough_step=) overrides it."""
+    on this device, where it takes a vector step at all: on PoCL, whose vector code gives its scalar code's bits there; not on
+    Intel's CPU runtime, whose vector code rounds the microfacet arithmetic otherwise (a weight
+    3e-3 off, which sends a path elsewhere: benchmarks/shading_lanes.py, README), and whose vector
+    steps ran slower than its scalar ones anyway. Packets(bsdf_steps=) overrides it."""
     return devmod.is_pocl(device)
 
 
@@ -86,28 +86,31 @@ class Packets:
     engine = "packet"
 
     def __init__(self, device, features: dict, packed, vector_step: bool | None = None,
-                 rough_step: bool | None = None):
+                 bsdf_steps: bool | None = None):
         """vector_step: whether diffuse lanes take their steps in the vector lanes where the scene
-        allows (default: where vector_step_pays); rough_step: whether lanes at rough plastic
-        triangles take theirs there too, with a vector step (default: where rough_step_pays)."""
+        allows (default: where vector_step_pays); bsdf_steps: whether lanes at rough plastic
+        triangles take theirs there too, with a vector step (default: where bsdf_steps_pay);
+        self.bsdf_steps names the steps the kernel takes."""
         self.device = device
         self.width = width = PACKET_WIDTH
         extra = (f"-DVOLCL_PACKET_WIDTH={width}",)
         if vector_step is None:
             vector_step = vector_step_pays(device)
-        if rough_step is None:
-            rough_step = rough_step_pays(device)
-        lanes = wavefront.diffuse_lanes(packed, rough=rough_step) if vector_step else None
+        if bsdf_steps is None:
+            bsdf_steps = bsdf_steps_pay(device)
+        lanes = wavefront.diffuse_lanes(packed, bsdfs=bsdf_steps) if vector_step else None
+        self.bsdf_steps = ()
         if lanes is not None:
-            table, slots, tris, light_tris, checkers, rough, bitmaps = lanes
-            extra += ("-DVOLCL_PACKET_LANES=1", f"-DVOLCL_WF_TINY={tris}", f"-DVOLCL_WF_LIGHT_TRIS={light_tris}",
-                      f"-DVOLCL_WF_CHECKERS={checkers}")
-            if rough:
-                extra += ("-DVOLCL_PACKET_ROUGH=1", f"-DVOLCL_PACKET_ROUGH_BITMAPS={bitmaps}")
+            table, slots = lanes.table, lanes.slots
+            extra += ("-DVOLCL_PACKET_LANES=1", f"-DVOLCL_WF_TINY={lanes.tris}",
+                      f"-DVOLCL_WF_LIGHT_TRIS={lanes.light_tris}", f"-DVOLCL_WF_CHECKERS={lanes.checkers}",
+                      f"-DVOLCL_PACKET_BITMAPS={lanes.bitmaps}")
+            if lanes.rough:
+                extra += ("-DVOLCL_PACKET_ROUGH=1",)
+            self.bsdf_steps = ("rough",) if lanes.rough else ()
         else:
-            table, slots, rough = np.zeros(1, np.float32), np.full(1, -1, np.int32), 0
+            table, slots = np.zeros(1, np.float32), np.full(1, -1, np.int32)
         self.vector_step = lanes is not None
-        self.rough_step = bool(rough)
         flags = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
         self.lanes_args = (cl.Buffer(device.ctx, flags, hostbuf=table), cl.Buffer(device.ctx, flags, hostbuf=slots))
         self.kernel = cl.Kernel(device.program(features, SOURCE_FILE, extra), KERNEL)

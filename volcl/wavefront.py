@@ -28,13 +28,14 @@ A Renderer takes it by itself ("auto") where it pays (pays()), or when asked (en
 from __future__ import annotations
 
 import threading
+from typing import NamedTuple
 import weakref
 
 import numpy as np
 
 from . import device as devmod
 from . import layout
-from . import lanes_rough
+from . import lanes_bsdfs
 from . import packets
 from .errors import VolclError
 from .opencl import cl
@@ -215,12 +216,12 @@ def _tiny_triangles(packed, count):
     return leaves["v"].transpose(0, 2, 1)[used].reshape(count, 3, 3), leaves["prim"][used]
 
 
-def _lanes_surfaces(packed, corners, codes, rough=False):
+def _lanes_surfaces(packed, corners, codes, steps=False):
     """Which tested triangles the surface stage scatters from itself (wavefront_surface.cl): plain
     diffuse, untextured or with a checkerboard of two colours on the mesh's uv, flat, not
     emitting, with a normal whose library bits are known; their normals and bsdf records, which
-    of them are checkerboards (_checkers); and with `rough` which are rough plastic ones the packet
-    renderer's vector step takes (volcl.lanes_rough), and which of those read a bitmap."""
+    of them are checkerboards (_checkers); and with `steps` those the packet renderer's bsdf steps
+    take (volcl.lanes_bsdfs.Surfaces; none without)."""
     tris, shapes, bsdfs = packed.arrays["triangles"], packed.arrays["shapes"], packed.arrays["bsdfs"]
     shape = shapes[tris["shape"][codes]]
     bsdf = bsdfs[shape["bsdf"]]
@@ -230,8 +231,8 @@ def _lanes_surfaces(packed, corners, codes, rough=False):
     surface = ok & (shape["light"] < 0) & (tris["normals"][codes] < 0)
     lanes = (surface & (bsdf["type"] == layout.BSDF_TYPES["diffuse"]) & (plain | checker)
              & (bsdf["flags"] & (FLAG_UV_FRAME | FLAG_PASSES) == 0))
-    smooth, textured = lanes_rough.surfaces(packed, codes, shape, bsdf) if rough else (np.zeros(len(codes), bool),) * 2
-    return lanes, ng, bsdf, checker & lanes, smooth & surface, textured & surface
+    more = lanes_bsdfs.surfaces(packed, codes, shape, bsdf)
+    return lanes, ng, bsdf, checker & lanes, lanes_bsdfs.select(more, surface & steps)
 
 
 def _checkers(packed, codes, shape, bsdf):
@@ -281,29 +282,39 @@ def lanes_lights(packed) -> str | None:
     return None
 
 
-def diffuse_lanes(packed, rough: bool = False) -> tuple[np.ndarray, np.ndarray, int, int, int, int, int] | None:
+class LanesTable(NamedTuple):
+    """What the lanes scatter from (diffuse_lanes): the table, a slot per triangle row (-1 where
+    the lanes do not scatter from it), the table's triangle and light triangle counts
+    (VOLCL_WF_TINY, VOLCL_WF_LIGHT_TRIS), and 1 or 0: some of them checkered (VOLCL_WF_CHECKERS),
+    rough plastic (VOLCL_PACKET_ROUGH), reading a bitmap (VOLCL_PACKET_BITMAPS)."""
+    table: np.ndarray
+    slots: np.ndarray
+    tris: int
+    light_tris: int
+    checkers: int
+    rough: int
+    bitmaps: int
+
+
+def diffuse_lanes(packed, bsdfs: bool = False) -> LanesTable | None:
     """The table with which the lanes scatter from the scene's plain diffuse triangles
     (lanes_surface.h: untextured or checkered with two colours, flat, not emitting), and with
-    `rough` also from its rough plastic ones (volcl.lanes_rough), every used triangle of the
-    scene's leaf packets in packet order, and a slot per triangle row (-1 where the lanes do not
-    scatter from it); with the table's triangle and light triangle counts (VOLCL_WF_TINY,
-    VOLCL_WF_LIGHT_TRIS), 1 where some of them are checkered (VOLCL_WF_CHECKERS), 1 where some
-    are rough plastic ones (VOLCL_PACKET_ROUGH) and 1 where some of those read a bitmap
-    (VOLCL_PACKET_ROUGH_BITMAPS), else 0s. None where there is no such triangle or the lanes cannot
-    sample the lights."""
+    `bsdfs` also from those the packet renderer's bsdf steps take (volcl.lanes_bsdfs), every used
+    triangle of the scene's leaf packets in packet order. None where there is no such triangle or
+    the lanes cannot sample the lights."""
     leaves = scene_leaves(packed)
     count = int(_used_lanes(leaves).sum())
     if count == 0 or lanes_lights(packed):
         return None
     corners, codes = _tiny_triangles(packed, count)
-    lanes, _, _, checker, smooth, textured = _lanes_surfaces(packed, corners, codes, rough)
-    taken = lanes | smooth
+    lanes, _, _, checker, more = _lanes_surfaces(packed, corners, codes, bsdfs)
+    taken = lanes | more.rough
     if not taken.any():
         return None
     slots = np.full(max(len(packed.arrays["triangles"]), 1), -1, np.int32)
     slots[codes[taken]] = np.flatnonzero(taken)
-    return (lanes_table(packed, count, 0, True, rough), slots, count, len(_light_triangles(packed)[0]),
-            int(checker.any()), int(smooth.any()), int(textured.any()))
+    return LanesTable(lanes_table(packed, count, 0, True, bsdfs), slots, count, len(_light_triangles(packed)[0]),
+                      int(checker.any()), int(more.rough.any()), int((more.bitmap >= 0).any()))
 
 
 def _light_triangles(packed):
@@ -324,11 +335,11 @@ def _light_triangles(packed):
             np.asarray(out[3], np.float32))
 
 
-def lanes_table(packed, tiny: int = 0, spheres: int = 0, surface: bool = False, rough: bool = False) -> np.ndarray:
+def lanes_table(packed, tiny: int = 0, spheres: int = 0, surface: bool = False, bsdfs: bool = False) -> np.ndarray:
     """The lights' and media's parameters the lanes stage reads (wavefront_state.h's table); with
     `tiny` the scene's triangles and spheres in packet order (lanes_triangles.h), with `surface`
     the tested triangles' diffuse surfaces and the light triangles (wavefront_surface.cl), and with
-    `rough` their rough plastic ones (lanes_rough.h)."""
+    `bsdfs` those of the packet renderer's bsdf steps (volcl.lanes_bsdfs)."""
     t = np.zeros((TABLE_ROWS, TABLE_STRIDE), np.float32)
     tri = np.zeros((TRI_COORDS, tiny, TRI_SPACING), np.float32)
     sph = np.zeros((SPHERE_COORDS, spheres, TRI_SPACING), np.float32)
@@ -337,10 +348,10 @@ def lanes_table(packed, tiny: int = 0, spheres: int = 0, surface: bool = False, 
         tri[:9, :, 0] = corners.reshape(tiny, 9).T
         tri[9, :, 0] = codes.astype(np.int32).view(np.float32)
         if surface:
-            lanes, ng, bsdf, checker, smooth, textured = _lanes_surfaces(packed, corners, codes, rough)
+            lanes, ng, bsdf, checker, more = _lanes_surfaces(packed, corners, codes, bsdfs)
             tri[10:13, :, 0] = ng.T
             tri[13, :, 0] = np.abs(corners).max(axis=(1, 2))
-            tri[14, :, 0] = np.where(smooth, lanes_rough.KIND, lanes)
+            tri[14, :, 0] = np.where(more.rough, lanes_bsdfs.ROUGH, lanes)
             tri[15:18, :, 0] = bsdf["color"].T
             tri[18, :, 0] = bsdf["twosided"] != 0
             if checker.any():
@@ -353,8 +364,8 @@ def lanes_table(packed, tiny: int = 0, spheres: int = 0, surface: bool = False, 
                 tri[20:26, checker, 0] = uvs[checker].T
                 tri[26:32, checker, 0] = tex["to_uv"][checker].T
                 tri[32:35, checker, 0] = tex["color1"][checker].T
-            if smooth.any():
-                lanes_rough.fill(tri, packed, codes, bsdf, smooth, textured)
+            if more.rough.any():
+                lanes_bsdfs.fill(tri, packed, codes, bsdf, more)
     if spheres:
         leaves = scene_leaves(packed)
         code = leaves["prim"][leaves["prim"] < 0]

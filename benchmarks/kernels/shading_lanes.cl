@@ -288,7 +288,7 @@ VOLCL_KERNEL void shade_gfold(__global const float *out, int n, __global const i
  * every function inlined (as the lanes stages build them) */
 #pragma clang attribute push (__attribute__((always_inline)), apply_to = function)
 #define VOLCL_WF_TINY 1                 /* (the rough step's table, unread here, needs a size) */
-#define VOLCL_PACKET_ROUGH_BITMAPS 1
+#define VOLCL_PACKET_BITMAPS 1
 #include "lanes.h"
 #include "wavefront_state.h"
 #include "lanes_rows.h"
@@ -301,7 +301,7 @@ VOLCL_KERNEL void shade_gfold(__global const float *out, int n, __global const i
 #endif
 
 /* the record's numbers as the rough step's table holds them (the host checked what they are) */
-inline LanesRough sh_record(__global const Bsdf *b, __global const Texture *t) {
+inline LanesRough sh_record(__global const Bsdf *b) {
     LanesRough r;
     r.alpha = b->alpha_u;
     r.sw = b->spec_weight;
@@ -312,6 +312,12 @@ inline LanesRough sh_record(__global const Bsdf *b, __global const Texture *t) {
     r.textured = true;
     r.spec_r = v3(b->spec_r[0], b->spec_r[1], b->spec_r[2]);
     r.table = max(b->table, 0);
+    return r;
+}
+
+/* the texture's, likewise */
+inline LanesBitmap sh_bitmap_record(__global const Texture *t) {
+    LanesBitmap r;
     r.width = t->width;
     r.height = t->height;
     r.wrap = t->wrap;
@@ -331,12 +337,13 @@ inline void sh_shade(__global const Bsdf *bsdfs, __global const Texture *texture
                      __global const float *bsdf_tables, int index, __global const float *in, __global float *out,
                      int n, int i) {
     __global const Bsdf *b = &bsdfs[index];
-    LanesRough r = sh_record(b, &textures[b->color_tex]);
+    LanesRough r = sh_record(b);
+    LanesBitmap bm = sh_bitmap_record(&textures[b->color_tex]);
     float u = IN(0), v = IN(1);
     V3 wo = v3(IN(2), IN(3), IN(4)), wi = v3(IN(5), IN(6), IN(7));
     float u1 = IN(8), u20 = IN(9), u21 = IN(10);
 
-    V3 color = lanes_bitmap(texels, &r, u, v);
+    V3 color = lanes_bitmap(texels, &bm, u, v);
     float pdf;
     V3 f = lanes_rough_eval(&r, bsdf_tables, color, wo, wi, &pdf);
 #if SHADE_PERTURB
