@@ -51,14 +51,20 @@
  * corners, 1 where the stage scatters from the triangle itself (plain diffuse), its reflectance
  * rgb (a checkerboard's first colour), 1 for a two-sided bsdf; with VOLCL_WF_CHECKERS, 1 where
  * the reflectance is a checkerboard of two colours on the triangle's uvs, its uvs (u0 v0 u1 v1 u2
- * v2), the texture's to_uv (row-major 2x3) and its second colour rgb; for the packet renderer's
- * rough plastic triangles (1 above is 2 there; lanes_rough.h) the roughness, the specular
+ * v2), the texture's to_uv (row-major 2x3) and its second colour rgb. Only in the packet
+ * renderer's table where it takes the rough step (VOLCL_PACKET_ROUGH), which holds no spheres, for its rough
+ * plastic triangles (1 above is 2 there; lanes_rough.h) the roughness, the specular
  * sampling weight, eta, 1 / eta^2, the internal reflectance, 1 for a nonlinear bsdf, the specular
  * reflectance rgb, where its transmittance table starts in the bsdf tables (int bits), 1 where the
  * diffuse reflectance is a bitmap, the bitmap's width, height, wrap mode, data and lookup table
  * offsets (int bits; on every triangle a bitmap of the scene's, so that every lane reads within
- * one) and its to_uv (lanes_bitmap.h; the triangle's uvs above) */
+ * one) and its to_uv (lanes_bitmap.h; the triangle's uvs above). (With those in every table, the
+ * wavefront's medium stage ran point_in_fog 2-7% slower on PoCL.) */
+#if defined(VOLCL_PACKET_ROUGH) && VOLCL_PACKET_ROUGH
 #define WF_TRI_COORDS 57
+#else
+#define WF_TRI_COORDS 35
+#endif
 #define WF_TRI_AT(c, k) (WF_TABLE_ROWS * WF_TABLE_STRIDE + ((c) * VOLCL_WF_TINY + (k)) * 16)
 #define WF_TRI_NG 10
 #define WF_TRI_MAG 13

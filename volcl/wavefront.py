@@ -54,7 +54,8 @@ TABLE_ROWS = 18
 T_LIGHT_POS, T_LIGHT_VALUE, T_SIGMA_T, T_ALBEDO, T_G, T_ISO, T_LANES, T_POINT, T_AREA, T_SEALED = (
     0, 3, 6, 9, 12, 13, 14, 15, 16, 17)
 TRI_SPACING = 16        # words between a tiny scene's triangle numbers (wavefront_state.h WF_TRI_AT)
-TRI_COORDS, SPHERE_COORDS, LIGHT_TRI_COORDS = 57, 5, 16     # numbers per triangle, sphere, light triangle
+TRI_COORDS, SPHERE_COORDS, LIGHT_TRI_COORDS = 35, 5, 16     # numbers per triangle, sphere, light triangle
+TRI_COORDS_BSDFS = 57   # per triangle in the packet renderer's table, with its bsdf steps' numbers
 # the most triangles and spheres of a scene the lanes stage traces itself, testing every one for
 # every ray (kernels/lanes_triangles.h), and light triangles the surface stage samples
 TINY_LANES = 16
@@ -341,14 +342,18 @@ def lanes_table(packed, tiny: int = 0, spheres: int = 0, surface: bool = False, 
     the tested triangles' diffuse surfaces and the light triangles (wavefront_surface.cl), and with
     `bsdfs` those of the packet renderer's bsdf steps (volcl.lanes_bsdfs)."""
     t = np.zeros((TABLE_ROWS, TABLE_STRIDE), np.float32)
-    tri = np.zeros((TRI_COORDS, tiny, TRI_SPACING), np.float32)
+    corners, codes = _tiny_triangles(packed, tiny) if tiny else (None, None)
+    if tiny and surface:
+        lanes, ng, bsdf, checker, more = _lanes_surfaces(packed, corners, codes, bsdfs)
+    # the rough coordinates where the kernel takes the rough step (VOLCL_PACKET_ROUGH: WF_TRI_COORDS)
+    rough = bool(tiny and surface and more.rough.any())
+    assert not (rough and spheres), "the rough step's numbers take the spheres' place"
+    tri = np.zeros((TRI_COORDS_BSDFS if rough else TRI_COORDS, tiny, TRI_SPACING), np.float32)
     sph = np.zeros((SPHERE_COORDS, spheres, TRI_SPACING), np.float32)
     if tiny:
-        corners, codes = _tiny_triangles(packed, tiny)
         tri[:9, :, 0] = corners.reshape(tiny, 9).T
         tri[9, :, 0] = codes.astype(np.int32).view(np.float32)
         if surface:
-            lanes, ng, bsdf, checker, more = _lanes_surfaces(packed, corners, codes, bsdfs)
             tri[10:13, :, 0] = ng.T
             tri[13, :, 0] = np.abs(corners).max(axis=(1, 2))
             tri[14, :, 0] = np.where(more.rough, lanes_bsdfs.ROUGH, lanes)
@@ -364,7 +369,7 @@ def lanes_table(packed, tiny: int = 0, spheres: int = 0, surface: bool = False, 
                 tri[20:26, checker, 0] = uvs[checker].T
                 tri[26:32, checker, 0] = tex["to_uv"][checker].T
                 tri[32:35, checker, 0] = tex["color1"][checker].T
-            if more.rough.any():
+            if rough:
                 lanes_bsdfs.fill(tri, packed, codes, bsdf, more)
     if spheres:
         leaves = scene_leaves(packed)
