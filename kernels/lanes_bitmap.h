@@ -49,7 +49,8 @@ inline LanesBitmap lanes_bitmap_gather(__global const float *table, int slot) {
  * as a float quotient corrected by one either way (exact while |p| / res < 2^22: texel coordinates
  * of a few million texels) */
 inline int lanes_wrap(int p, int res, float inv_res, int mode) {
-    int q = (int)floor((float)p * inv_res);
+    float fq = floor((float)p * inv_res);
+    int q = (int)fq;
     int m = p - q * res;
     q = m < 0 ? q - 1 : q;
     m = m < 0 ? m + res : m;

@@ -148,12 +148,14 @@ inline int lanes_pad(PacketLanes *z, int n) {
 /* What a step did to the paths of its first n entries (entry k: lane owner[k]), as the scalar steps
  * take it back: the sample of a path that ended finished, the lane's next one started. */
 #define LANES_TAKE_BACK(z, owner, n)                                                                           \
-    for (int k = 0; k < (n); ++k) {                                                                           \
-        int l = (owner)[k];                                                                                   \
-        if (lane_store(&(z), k, shadow_root, &ps[l], &rng[l]) || ++job[l].steps >= VOLCL_MAX_STEPS)          \
-            lane_finish(&sc, filter_table, &job[l], passes, sample_base, slots, &ps[l], &rng[l], &alive[l],  \
-                        &finishing[l], &done_L[l], sums, sums_sq, invalid, cutoffs);                          \
-    }
+    do {                                                                                                      \
+        for (int k = 0; k < (n); ++k) {                                                                       \
+            int l = (owner)[k];                                                                               \
+            if (lane_store(&(z), k, shadow_root, &ps[l], &rng[l]) || ++job[l].steps >= VOLCL_MAX_STEPS)      \
+                lane_finish(&sc, filter_table, &job[l], passes, sample_base, slots, &ps[l], &rng[l],         \
+                            &alive[l], &finishing[l], &done_L[l], sums, sums_sq, invalid, cutoffs);           \
+        }                                                                                                     \
+    } while (0)
 #endif
 
 VOLCL_KERNEL void render_packets(VOLCL_SCENE_ARGS,

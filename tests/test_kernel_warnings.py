@@ -6,7 +6,8 @@ arguments unused, by design). The wavefront renderer's entry points (wavefront.c
 wavefront_surface.cl) are checked with every feature compiled in, with and without the lanes stage's
 whole-scene tests, the medium stage also with its paths in a loop of each work-item (PoCL's build),
 and the packet renderer's (packets.cl) at both packet widths with every feature it takes, with and
-without its vector step for diffuse lanes (packet_lanes.h). Skipped, with the reason, where clang is
+without its vector step for diffuse lanes (packet_lanes.h), and with its rough plastic step and
+bitmaps (lanes_rough.h, lanes_bitmap.h). Skipped, with the reason, where clang is
 absent (`./quickstart test` installs it)."""
 import shutil
 import subprocess
@@ -42,11 +43,13 @@ def _specializations():
 TINY = ["-DVOLCL_WF_TINY=6", "-DVOLCL_WF_TINY_ENDS=40", "-DVOLCL_WF_SPHERES=2", "-DVOLCL_WF_LIGHT_TRIS=3"]
 ENTRY_POINTS = ["render.cl", "wavefront.cl", "wavefront_lanes.cl", "wavefront.cl tiny", "wavefront_lanes.cl tiny",
                 "wavefront_lanes.cl loop", "wavefront_lanes.cl tiny loop", "wavefront_surface.cl tiny",
-                "packets.cl 16", "packets.cl 8", "packets.cl 16 lanes", "packets.cl 8 lanes"]
+                "packets.cl 16", "packets.cl 8", "packets.cl 16 lanes", "packets.cl 8 lanes", "packets.cl 16 rough"]
 # the medium stage with its paths in a loop of each work-item, as PoCL builds it (wavefront.lanes_loop)
 LOOP = ["-DVOLCL_WF_LOOP=16"]
 # the packet renderer's vector step, as built for a scene of 6 tested triangles and 3 light triangles
 PACKET_LANES = ["-DVOLCL_PACKET_LANES=1", "-DVOLCL_WF_TINY=6", "-DVOLCL_WF_LIGHT_TRIS=3"]
+# and its rough plastic step, reading bitmaps
+PACKET_ROUGH = PACKET_LANES + ["-DVOLCL_PACKET_ROUGH=1", "-DVOLCL_PACKET_BITMAPS=1"]
 
 
 def _compile(args, features, entry="render.cl"):
@@ -55,7 +58,7 @@ def _compile(args, features, entry="render.cl"):
     if name == packets.SOURCE_FILE:     # the features it takes (the others are an #error there)
         features = {k: v and k not in packets.EXCLUDED for k, v in features.items()}
         width, _, lanes = variant.partition(" ")
-        extra = [f"-DVOLCL_PACKET_WIDTH={width}"] + (PACKET_LANES if lanes else [])
+        extra = [f"-DVOLCL_PACKET_WIDTH={width}"] + {"": [], "lanes": PACKET_LANES, "rough": PACKET_ROUGH}[lanes]
     cmd = [CLANG] + FRONT_END + args + build_options(features, tuple(extra)) + [str(kernels_dir() / name)]
     return subprocess.run(cmd, capture_output=True, text=True)
 
