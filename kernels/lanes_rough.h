@@ -163,18 +163,13 @@ inline V3 lanes_ggx_sample(float a, V3 wi, float u0, float u1) {
     return lanes_normalize(v3(-mx, -my, 1.0f));
 }
 
-/* path_surface_nee at a rough plastic vertex (lanes_diffuse_nee's draws and light sample), with
- * bsdf_eval in the frame (s, t, n): whether it leaves a shadow ray, and what the ray brings where
- * nothing blocks it. *f_x: the light's f.x, which the bounce waits on. */
+/* path_surface_nee at a rough plastic vertex (lanes_nee_light's light), with bsdf_eval in the
+ * frame (s, t, n): whether it leaves a shadow ray, and what the ray brings where nothing blocks
+ * it. *f_x: the light's f.x, which the bounce waits on. */
 inline bool lanes_rough_nee(__global const float *table, __global const float *tables, __global const RenderParams *rp,
                             const LanesRough *r, V3 color, V3 p, V3 s, V3 t, V3 n, V3 wo, bool scatter, bool do_nee,
                             Rng32 *rng, LanesLight *ls, V3 *value, float *f_x) {
-    float u_pick = rng32_float_if(rng, scatter);
-    float ul_x = rng32_float_if(rng, scatter), ul_y = rng32_float_if(rng, scatter);
-    int count = rp->light_count;
-    int li = clamp((int)(u_pick * (float)count), 0, max(count - 1, 0));
-    bool nee = scatter & do_nee;
-    nee = nee & lanes_light_sample(table, p, li, count, ul_x, ul_y, ls);
+    bool nee = lanes_nee_light(table, rp, p, scatter, do_nee, rng, ls);
     float value_max = v3_max(ls->value);
     float pdf_b;
     V3 f = lanes_rough_eval(r, tables, color, wo, lanes_to_local(ls->wi, s, t, n), &pdf_b);

@@ -230,17 +230,24 @@ inline void lanes_diffuse_vertex(const LanesTriangle *tri, float b1, float b2, V
     *wo_z = lanes_dot(wo, *n);
 }
 
-/* path_surface_nee at such a vertex: three numbers drawn where it scatters (`scatter`), a light
- * sampled where the path does next-event estimation (`do_nee`); whether that leaves a shadow ray
- * (towards ls->wi, ls->dist away), and what the ray brings where nothing blocks it: f Le w / pdf. */
-inline bool lanes_diffuse_nee(__global const float *table, __global const RenderParams *rp, V3 color, V3 p, V3 n,
-                              float wo_z, bool scatter, bool do_nee, Rng32 *rng, LanesLight *ls, V3 *value) {
+/* path_surface_nee's light at point p: three numbers drawn where the path scatters (`scatter`), a
+ * light picked and sampled as light_sample does where it does next-event estimation (`do_nee`);
+ * whether that gives a sample, in *ls */
+inline bool lanes_nee_light(__global const float *table, __global const RenderParams *rp, V3 p, bool scatter,
+                            bool do_nee, Rng32 *rng, LanesLight *ls) {
     float u_pick = rng32_float_if(rng, scatter);
     float ul_x = rng32_float_if(rng, scatter), ul_y = rng32_float_if(rng, scatter);
     int count = rp->light_count;
     int li = clamp((int)(u_pick * (float)count), 0, max(count - 1, 0));
     bool nee = scatter & do_nee;
-    nee = nee & lanes_light_sample(table, p, li, count, ul_x, ul_y, ls);
+    return nee & lanes_light_sample(table, p, li, count, ul_x, ul_y, ls);
+}
+
+/* path_surface_nee at such a vertex (lanes_nee_light's light): whether it leaves a shadow ray
+ * (towards ls->wi, ls->dist away), and what the ray brings where nothing blocks it: f Le w / pdf. */
+inline bool lanes_diffuse_nee(__global const float *table, __global const RenderParams *rp, V3 color, V3 p, V3 n,
+                              float wo_z, bool scatter, bool do_nee, Rng32 *rng, LanesLight *ls, V3 *value) {
+    bool nee = lanes_nee_light(table, rp, p, scatter, do_nee, rng, ls);
     float value_max = v3_max(ls->value);
     float wi_z = lanes_dot(ls->wi, n);
     float pdf_b = wi_z * VOLCL_INV_PI;

@@ -58,8 +58,8 @@
  * reflectance rgb, where its transmittance table starts in the bsdf tables (int bits), 1 where the
  * diffuse reflectance is a bitmap, the bitmap's width, height, wrap mode, data and lookup table
  * offsets (int bits; on every triangle a bitmap of the scene's, so that every lane reads within
- * one) and its to_uv (lanes_bitmap.h; the triangle's uvs above). (With those in every table, the
- * wavefront's medium stage ran point_in_fog 2-7% slower on PoCL.) */
+ * one) and its to_uv (lanes_bitmap.h; the triangle's uvs above). (The wavefront's stages read none
+ * of those: their tables keep 35.) */
 #if defined(VOLCL_PACKET_ROUGH) && VOLCL_PACKET_ROUGH
 #define WF_TRI_COORDS 57
 #else

@@ -45,23 +45,21 @@ def _bitmaps(packed, index, shape, codes):
             & (shape["uv_map"] < 0) & (packed.arrays["triangles"]["uvs"][codes] >= 0))
 
 
-def surfaces(packed, codes, shape, bsdf) -> Surfaces:
+def surfaces(packed, codes, shape, bsdf, keep) -> Surfaces:
     """Which tested triangles (primitive codes `codes`, their shape and bsdf records) the bsdf steps
-    take. The caller adds what every lanes triangle needs (flat, not emitting, a normal of known
-    bits)."""
+    take, of those where `keep` holds: what every lanes triangle needs (flat, not emitting, a normal
+    of known bits), or all False where the renderer takes no bsdf step."""
+    if not np.any(keep):
+        none = np.zeros(len(codes), bool)
+        return Surfaces(none, none, np.full(len(codes), -1, np.int32))
     flags = bsdf["flags"]
     bitmap = _bitmaps(packed, bsdf["color_tex"], shape, codes)
     rough = ((bsdf["type"] == layout.BSDF_TYPES["roughplastic"])
              & (bsdf["distribution"] == layout.MICROFACETS["ggx"]) & (flags & FLAGS["visible"] != 0)
              & (flags & (FLAGS["uv_frame"] | FLAGS["passes"]) == 0)
              & (bsdf["alpha_u"] == bsdf["alpha_v"]) & (bsdf["alpha_u_tex"] < 0) & (bsdf["alpha_v_tex"] < 0)
-             & (bsdf["spec_r_tex"] < 0) & (bsdf["table"] >= 0) & ((bsdf["color_tex"] < 0) | bitmap))
+             & (bsdf["spec_r_tex"] < 0) & (bsdf["table"] >= 0) & ((bsdf["color_tex"] < 0) | bitmap) & keep)
     return Surfaces(rough, rough & bitmap, np.where(rough & bitmap, bsdf["color_tex"], -1))
-
-
-def select(s: Surfaces, keep) -> Surfaces:
-    """s on the triangles where `keep` holds (none elsewhere)."""
-    return Surfaces(s.rough & keep, s.textured & keep, np.where(keep, s.bitmap, -1))
 
 
 def fill(tri, packed, codes, bsdf, s: Surfaces):

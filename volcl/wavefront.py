@@ -232,8 +232,8 @@ def _lanes_surfaces(packed, corners, codes, steps=False):
     surface = ok & (shape["light"] < 0) & (tris["normals"][codes] < 0)
     lanes = (surface & (bsdf["type"] == layout.BSDF_TYPES["diffuse"]) & (plain | checker)
              & (bsdf["flags"] & (FLAG_UV_FRAME | FLAG_PASSES) == 0))
-    more = lanes_bsdfs.surfaces(packed, codes, shape, bsdf)
-    return lanes, ng, bsdf, checker & lanes, lanes_bsdfs.select(more, surface & steps)
+    more = lanes_bsdfs.surfaces(packed, codes, shape, bsdf, surface & steps)
+    return lanes, ng, bsdf, checker & lanes, more
 
 
 def _checkers(packed, codes, shape, bsdf):
